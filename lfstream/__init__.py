@@ -1,0 +1,49 @@
+"""lfstream: light-field video compression, reconstruction and refocusing.
+
+Conventions (see :mod:`lfstream.lightfield`): a frame is ``(U, V, H, W, 3)``, a video
+``(T, U, V, H, W, 3)``; the centre view is ``(U // 2, V // 2)``; uint8 at the boundaries,
+float32 in ``[0, 1]`` inside; disparity follows the HCI benchmark's sign.
+"""
+
+from lfstream.errors import (
+    BitstreamError,
+    LFFileError,
+    LFFormatError,
+    LFMissingViewsError,
+    LFShapeError,
+    LFStreamError,
+    LFValueError,
+    WeightsError,
+)
+from lfstream.io import load_lf, read_lf, read_pfm, write_lf, write_pfm
+
+__version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    # The codec pulls in PyAV and the decoder stages; import it only when asked for.
+    if name in ("encode", "decode"):
+        from lfstream import codec
+
+        return getattr(codec, name)
+    raise AttributeError(f"module 'lfstream' has no attribute {name!r}")
+
+
+__all__ = [
+    "__version__",
+    "LFStreamError",
+    "LFValueError",
+    "LFShapeError",
+    "LFFileError",
+    "LFFormatError",
+    "LFMissingViewsError",
+    "BitstreamError",
+    "WeightsError",
+    "read_lf",
+    "load_lf",
+    "write_lf",
+    "read_pfm",
+    "write_pfm",
+    "encode",
+    "decode",
+]

@@ -1,0 +1,1 @@
+"""Subcommands beyond ``info``; importing this module registers them with the CLI."""

@@ -1,0 +1,339 @@
+"""The light-field array convention and the operations on it.
+
+Convention (stated once, used everywhere):
+
+* A frame is an array of shape ``(U, V, H, W, C)``; a video is ``(T, U, V, H, W, C)``.
+  ``u`` indexes the *row* and ``v`` the *column* of the view grid, ``C`` is 3 (RGB).
+* The centre view is ``(U // 2, V // 2)``.
+* uint8 at the boundaries (files, bitstreams, the public decode result); float32 in
+  ``[0, 1]`` inside the numerical stages.
+* Disparity (HCI convention): a scene point at pixel ``(y, x)`` of the centre view with
+  disparity ``d`` appears at ``(y - d*(u - u0), x - d*(v - v0))`` in view ``(u, v)``;
+  ``d > 0`` means nearer than the focal plane. Units are pixels per view step.
+
+Every function here accepts a numpy array or a torch tensor and returns the same kind,
+because they are pure re-indexing or averaging operations.
+"""
+
+from __future__ import annotations
+
+from typing import TypeVar
+
+import numpy as np
+import torch
+
+from lfstream.errors import LFShapeError, LFValueError
+
+ArrayT = TypeVar("ArrayT", np.ndarray, torch.Tensor)
+
+#: Largest number of views per axis or pixels per side accepted anywhere, so that a
+#: corrupt header or a wrong argument fails early instead of allocating terabytes.
+MAX_VIEWS_PER_AXIS = 64
+MAX_VIEW_SIDE = 16384
+
+
+def _permute(x: ArrayT, axes: tuple[int, ...]) -> ArrayT:
+    if isinstance(x, torch.Tensor):
+        return x.permute(*axes)
+    return np.transpose(x, axes)
+
+
+def _is_array(x: object) -> bool:
+    return isinstance(x, (np.ndarray, torch.Tensor))
+
+
+def check_lf(lf: object, name: str = "lf", allow_video: bool = True) -> tuple[int, ...]:
+    """Validates that ``lf`` follows the convention and returns its shape.
+
+    Args:
+        lf: candidate light field (numpy array or torch tensor).
+        name: how the error message refers to the argument.
+        allow_video: accept a 6-D ``(T, U, V, H, W, C)`` array too.
+
+    Returns:
+        The shape as a tuple.
+
+    Raises:
+        LFShapeError: wrong type, rank, empty axis or channel count.
+    """
+    if not _is_array(lf):
+        raise LFShapeError(f"{name}: expected a numpy array or torch tensor, got {type(lf).__name__}")
+    shape = tuple(int(s) for s in lf.shape)  # type: ignore[union-attr]
+    ranks = (5, 6) if allow_video else (5,)
+    if len(shape) not in ranks:
+        want = "(U, V, H, W, C) or (T, U, V, H, W, C)" if allow_video else "(U, V, H, W, C)"
+        raise LFShapeError(f"{name}: expected shape {want}, got {shape}")
+    if any(s == 0 for s in shape):
+        raise LFShapeError(f"{name}: empty axis in shape {shape}")
+    if shape[-1] not in (1, 3):
+        raise LFShapeError(f"{name}: last axis must be colour channels (1 or 3), got {shape[-1]} in {shape}")
+    return shape
+
+
+def lf_dims(lf: ArrayT) -> tuple[int, int, int, int, int]:
+    """Returns ``(U, V, H, W, C)`` of a frame or video."""
+    shape = check_lf(lf)
+    u, v, h, w, c = shape[-5:]
+    return u, v, h, w, c
+
+
+def centre_index(u: int, v: int) -> tuple[int, int]:
+    """The centre view's grid index, ``(U // 2, V // 2)``."""
+    return u // 2, v // 2
+
+
+def centre_view(lf: ArrayT) -> ArrayT:
+    """The centre view of a frame or video.
+
+    Shape:
+        - lf: ``(*, U, V, H, W, C)``
+        - output: ``(*, H, W, C)``
+    """
+    u, v, *_ = lf_dims(lf)
+    u0, v0 = centre_index(u, v)
+    return lf[..., u0, v0, :, :, :]
+
+
+def crop_views(lf: ArrayT, k: int) -> ArrayT:
+    """Keeps the central ``k x k`` views, so the centre view stays the centre view.
+
+    Shape:
+        - lf: ``(*, U, V, H, W, C)`` with ``U, V >= k``
+        - output: ``(*, k, k, H, W, C)``
+    """
+    u, v, *_ = lf_dims(lf)
+    if not isinstance(k, (int, np.integer)) or k < 1 or k > min(u, v):
+        raise LFValueError(f"views: crop size must be an integer in 1..{min(u, v)}, got {k!r}")
+    su, sv = u // 2 - k // 2, v // 2 - k // 2
+    return lf[..., su : su + k, sv : sv + k, :, :, :]
+
+
+def downsample_angular(lf: ArrayT, factor: int = 2) -> ArrayT:
+    """Angular down-sampling by averaging each ``factor x factor`` block of adjacent views.
+
+    This is how the seed (§2.3.1) simulates a plenoptic camera with fewer, larger pixels
+    under each microlens. Views that do not fill a whole block at the far edge are dropped.
+    The result is float32 (numpy) or the input's float dtype (torch).
+
+    Shape:
+        - lf: ``(*, U, V, H, W, C)``
+        - output: ``(*, U // factor, V // factor, H, W, C)``
+    """
+    u, v, h, w, c = lf_dims(lf)
+    if not isinstance(factor, (int, np.integer)) or factor < 1 or factor > min(u, v):
+        raise LFValueError(f"factor: must be an integer in 1..{min(u, v)}, got {factor!r}")
+    nu, nv = u // factor, v // factor
+    lead = tuple(lf.shape[:-5])
+    x = lf[..., : nu * factor, : nv * factor, :, :, :]
+    x = x.reshape(*lead, nu, factor, nv, factor, h, w, c)
+    nl = len(lead)
+    if isinstance(x, torch.Tensor):
+        xf = x if x.is_floating_point() else x.float()
+        if not x.is_floating_point():
+            xf = xf / 255.0
+        return xf.mean(dim=(nl + 1, nl + 3))
+    xf = x.astype(np.float32)
+    if x.dtype == np.uint8:
+        xf /= 255.0
+    return xf.mean(axis=(nl + 1, nl + 3))
+
+
+def to_sensor(lf: ArrayT) -> ArrayT:
+    """SAI grid to plenoptic sensor (lenslet) image, seed Eq. 2.4.
+
+    ``Lp[s*U + u, t*V + v] = L[u, v, s, t]``: microlens ``(s, t)`` covers a ``U x V`` block
+    of sensor pixels and pixel ``(u, v)`` under it belongs to view ``(u, v)`` (0-based form
+    of ``L(s,t,u,v) = Lp(u + (s-1)N, v + (t-1)N)``).
+
+    Shape:
+        - lf: ``(*, U, V, H, W, C)``
+        - output: ``(*, H*U, W*V, C)``
+    """
+    u, v, h, w, c = lf_dims(lf)
+    lead = tuple(lf.shape[:-5])
+    n = len(lead)
+    axes = tuple(range(n)) + (n + 2, n + 0, n + 3, n + 1, n + 4)
+    return _permute(lf, axes).reshape(*lead, h * u, w * v, c)
+
+
+def from_sensor(img: ArrayT, views: int | tuple[int, int]) -> ArrayT:
+    """Plenoptic sensor image to SAI grid; the inverse of :func:`to_sensor`.
+
+    Shape:
+        - img: ``(*, H*U, W*V, C)``
+        - output: ``(*, U, V, H, W, C)``
+    """
+    u, v = (views, views) if isinstance(views, (int, np.integer)) else views
+    if img.ndim < 3:
+        raise LFShapeError(f"sensor image: expected (..., H, W, C), got shape {tuple(img.shape)}")
+    sh, sw, c = (int(s) for s in img.shape[-3:])
+    if u < 1 or v < 1 or sh % u or sw % v:
+        raise LFShapeError(f"sensor image: size {sh}x{sw} is not a multiple of the angular size {u}x{v}")
+    lead = tuple(img.shape[:-3])
+    n = len(lead)
+    x = img.reshape(*lead, sh // u, u, sw // v, v, c)
+    axes = tuple(range(n)) + (n + 1, n + 3, n + 0, n + 2, n + 4)
+    return _permute(x, axes)
+
+
+def to_mosaic(lf: ArrayT) -> ArrayT:
+    """SAI grid to a mosaic with the views tiled side by side, row ``u`` of views on top.
+
+    Shape:
+        - lf: ``(*, U, V, H, W, C)``
+        - output: ``(*, U*H, V*W, C)``
+    """
+    u, v, h, w, c = lf_dims(lf)
+    lead = tuple(lf.shape[:-5])
+    n = len(lead)
+    axes = tuple(range(n)) + (n + 0, n + 2, n + 1, n + 3, n + 4)
+    return _permute(lf, axes).reshape(*lead, u * h, v * w, c)
+
+
+def from_mosaic(img: ArrayT, views: int | tuple[int, int]) -> ArrayT:
+    """Mosaic to SAI grid; the inverse of :func:`to_mosaic`.
+
+    Shape:
+        - img: ``(*, U*H, V*W, C)``
+        - output: ``(*, U, V, H, W, C)``
+    """
+    u, v = (views, views) if isinstance(views, (int, np.integer)) else views
+    if img.ndim < 3:
+        raise LFShapeError(f"mosaic: expected (..., H, W, C), got shape {tuple(img.shape)}")
+    mh, mw, c = (int(s) for s in img.shape[-3:])
+    if u < 1 or v < 1 or mh % u or mw % v:
+        raise LFShapeError(f"mosaic: size {mh}x{mw} is not a multiple of the view grid {u}x{v}")
+    lead = tuple(img.shape[:-3])
+    n = len(lead)
+    x = img.reshape(*lead, u, mh // u, v, mw // v, c)
+    axes = tuple(range(n)) + (n + 0, n + 2, n + 1, n + 3, n + 4)
+    return _permute(x, axes)
+
+
+def aperture_weights(
+    views: tuple[int, int], radius: float | None = None, shape: str = "circle"
+) -> np.ndarray:
+    """Weights over the view grid that model a synthetic aperture.
+
+    Args:
+        views: ``(U, V)``.
+        radius: aperture radius in view steps, measured from the centre view; ``None``
+            means the full grid (every view weight 1). Radius 0 is a pinhole (seed Eq. 2.2).
+        shape: ``"circle"`` (hard disc), ``"square"`` (box) or ``"gaussian"``
+            (``exp(-r^2 / (2 radius^2))``, radius acting as sigma).
+
+    Returns:
+        float32 array ``(U, V)`` summing to a positive value.
+    """
+    u, v = views
+    uu, vv = np.meshgrid(np.arange(u) - u // 2, np.arange(v) - v // 2, indexing="ij")
+    if radius is None:
+        return np.ones((u, v), np.float32)
+    if not np.isfinite(radius) or radius < 0:
+        raise LFValueError(f"aperture radius must be finite and >= 0, got {radius!r}")
+    if shape == "circle":
+        w = (uu**2 + vv**2 <= radius**2 + 1e-9).astype(np.float32)
+    elif shape == "square":
+        w = ((np.abs(uu) <= radius + 1e-9) & (np.abs(vv) <= radius + 1e-9)).astype(np.float32)
+    elif shape == "gaussian":
+        if radius == 0:
+            w = ((uu == 0) & (vv == 0)).astype(np.float32)
+        else:
+            w = np.exp(-(uu**2 + vv**2) / (2.0 * radius**2)).astype(np.float32)
+    else:
+        raise LFValueError(f"aperture shape must be circle, square or gaussian, got {shape!r}")
+    return w
+
+
+def dof_image(lf: ArrayT, weights: np.ndarray | torch.Tensor | None = None) -> ArrayT:
+    """Depth-of-field image: the weighted mean of the views through an aperture (seed Eq. 2.1).
+
+    With ``weights=None`` every view counts equally (the full aperture); a one-hot weight at
+    the centre view gives the pinhole image (Eq. 2.2). The result is float (float32 for
+    uint8 input, scaled to ``[0, 1]``).
+
+    Shape:
+        - lf: ``(*, U, V, H, W, C)``
+        - weights: ``(U, V)``
+        - output: ``(*, H, W, C)``
+    """
+    u, v, *_ = lf_dims(lf)
+    is_torch = isinstance(lf, torch.Tensor)
+    x = as_float(lf)
+    if weights is None:
+        if is_torch:
+            return x.mean(dim=(-5, -4))
+        return x.mean(axis=(-5, -4))
+    wt = weights if isinstance(weights, torch.Tensor) else torch.as_tensor(np.asarray(weights, np.float32))
+    if tuple(wt.shape) != (u, v):
+        raise LFShapeError(f"weights: expected shape ({u}, {v}), got {tuple(wt.shape)}")
+    total = float(wt.sum())
+    if not np.isfinite(total) or total <= 0 or bool((wt < 0).any()):
+        raise LFValueError("weights: must be non-negative and sum to a positive finite value")
+    wt = wt / total
+    if is_torch:
+        wt = wt.to(device=x.device, dtype=x.dtype)
+        return torch.einsum("...uvhwc,uv->...hwc", x, wt)
+    return np.einsum("...uvhwc,uv->...hwc", x, wt.numpy().astype(x.dtype), optimize=True)
+
+
+def as_float(x: ArrayT) -> ArrayT:
+    """uint8 -> float32 in ``[0, 1]``; float inputs are returned as float32 (torch keeps its
+    float dtype), other integer types are rejected."""
+    if isinstance(x, torch.Tensor):
+        if x.dtype == torch.uint8:
+            return x.float() / 255.0
+        if x.is_floating_point():
+            return x
+        raise LFValueError(f"expected uint8 or float data, got {x.dtype}")
+    if x.dtype == np.uint8:
+        return x.astype(np.float32) / np.float32(255.0)
+    if np.issubdtype(x.dtype, np.floating):
+        return x.astype(np.float32, copy=False)
+    raise LFValueError(f"expected uint8 or float data, got {x.dtype}")
+
+
+def to_uint8(x: ArrayT) -> ArrayT:
+    """Float in ``[0, 1]`` -> uint8 with rounding and clipping; NaN maps to 0."""
+    if isinstance(x, torch.Tensor):
+        if x.dtype == torch.uint8:
+            return x
+        return torch.nan_to_num(x.float() * 255.0 + 0.5, nan=0.0).clamp_(0, 255).to(torch.uint8)
+    if x.dtype == np.uint8:
+        return x
+    y = np.nan_to_num(np.asarray(x, np.float32) * np.float32(255.0) + np.float32(0.5), nan=0.0)
+    return np.clip(y, 0, 255).astype(np.uint8)
+
+
+def check_finite(x: ArrayT, name: str = "lf") -> None:
+    """Raises :class:`LFValueError` if a float array holds NaN or Inf.
+
+    lfstream rejects non-finite input instead of sanitising it: a NaN in a light field is
+    a bug upstream, and silently replacing it would hide that bug.
+    """
+    if isinstance(x, torch.Tensor):
+        if x.is_floating_point() and not bool(torch.isfinite(x).all()):
+            raise LFValueError(f"{name}: contains NaN or Inf values")
+    elif np.issubdtype(np.asarray(x).dtype, np.floating) and not np.isfinite(x).all():
+        raise LFValueError(f"{name}: contains NaN or Inf values")
+
+
+__all__ = [
+    "MAX_VIEWS_PER_AXIS",
+    "MAX_VIEW_SIDE",
+    "check_lf",
+    "lf_dims",
+    "centre_index",
+    "centre_view",
+    "crop_views",
+    "downsample_angular",
+    "to_sensor",
+    "from_sensor",
+    "to_mosaic",
+    "from_mosaic",
+    "aperture_weights",
+    "dof_image",
+    "as_float",
+    "to_uint8",
+    "check_finite",
+]
