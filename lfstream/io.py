@@ -316,9 +316,11 @@ def iter_video_frames(path: Path, max_frames: int | None = None) -> Iterator[np.
 def video_grid_and_fps(path: Path) -> tuple[tuple[int, int] | None, float | None]:
     """Reads the view grid stored in a mosaic video's metadata and its frame rate."""
     with _open_container(path) as container:
-        grid = _parse_grid(container.metadata.get(GRID_METADATA_KEY))
-        if grid is None and container.streams.video:
-            grid = _parse_grid(container.streams.video[0].metadata.get(GRID_METADATA_KEY))
+        # Matroska upper-cases tag names, MP4 keeps them: look the key up case-insensitively.
+        tags = {k.lower(): v for k, v in container.metadata.items()}
+        if container.streams.video:
+            tags.update({k.lower(): v for k, v in container.streams.video[0].metadata.items()})
+        grid = _parse_grid(tags.get(GRID_METADATA_KEY))
         fps = None
         if container.streams.video and container.streams.video[0].average_rate:
             fps = float(container.streams.video[0].average_rate)

@@ -65,8 +65,8 @@ def check_lf(lf: object, name: str = "lf", allow_video: bool = True) -> tuple[in
         raise LFShapeError(f"{name}: expected shape {want}, got {shape}")
     if any(s == 0 for s in shape):
         raise LFShapeError(f"{name}: empty axis in shape {shape}")
-    if shape[-1] not in (1, 3):
-        raise LFShapeError(f"{name}: last axis must be colour channels (1 or 3), got {shape[-1]} in {shape}")
+    if shape[-1] not in (1, 3, 4):
+        raise LFShapeError(f"{name}: last axis must be colour channels (1, 3 or 4), got {shape[-1]} in {shape}")
     return shape
 
 

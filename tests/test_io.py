@@ -1,0 +1,163 @@
+import numpy as np
+import pytest
+
+from lfstream import LFStreamError, load_lf, read_lf, read_pfm, write_lf, write_pfm
+from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError
+from lfstream.io import write_image, write_video
+from lfstream.lightfield import to_mosaic, to_sensor
+from tests.conftest import random_lf, shared
+
+
+def test_seahorse_folder_is_5x5_of_500():
+    lf = read_lf(shared("seahorse5x5", "camImagesFlat"))
+    assert lf.shape == (5, 5, 500, 500, 3) and lf.dtype == np.uint8
+    # Neighbouring views differ (it is a real light field, not one image five times).
+    assert np.abs(lf[2, 0].astype(int) - lf[2, 4].astype(int)).mean() > 1
+
+
+@pytest.mark.parametrize("scene", ["cotton", "dino"])
+def test_hci_star_missing_views_error_or_mask(scene):
+    folder = shared("hci_star", scene)
+    with pytest.raises(LFMissingViewsError) as info:
+        read_lf(folder)
+    assert len(info.value.missing) == 81 - 33
+    assert str(folder) in str(info.value) and "(0,1)" in str(info.value)
+    lf, present = read_lf(folder, return_mask=True)
+    assert lf.shape == (9, 9, 512, 512, 3) and present.sum() == 33
+    # the star: centre row, centre column, both diagonals
+    assert present[4].all() and present[:, 4].all() and present.diagonal().all() and np.fliplr(present).diagonal().all()
+    assert (lf[~present] == 0).all() and lf[present].max() > 0
+
+
+def test_folder_naming_schemes(tmp_path, rng):
+    lf = random_lf(rng, (3, 2, 8, 10, 3))
+    rc = write_lf(tmp_path / "rc", lf)
+    np.testing.assert_array_equal(read_lf(rc), lf)
+    lytro = tmp_path / "lytro"
+    lytro.mkdir()
+    hci = tmp_path / "hci"
+    hci.mkdir()
+    sq = random_lf(rng, (3, 3, 8, 10, 3))
+    for u in range(3):
+        for v in range(3):
+            write_image(lytro / f"scene_{u + 1:02d}_{v + 1:02d}.png", sq[u, v])
+            write_image(hci / f"input_Cam{u * 3 + v:03d}.png", sq[u, v])
+    np.testing.assert_array_equal(read_lf(lytro), sq)
+    np.testing.assert_array_equal(read_lf(hci), sq)
+    np.testing.assert_array_equal(read_lf(lytro, flip_u=True, flip_v=True), sq[::-1, ::-1])
+
+
+def test_npy_npz_round_trip(tmp_path, rng):
+    video = random_lf(rng, (2, 3, 3, 6, 7, 3))
+    write_lf(tmp_path / "a.npy", video)
+    np.testing.assert_array_equal(read_lf(tmp_path / "a.npy"), video)
+    disp = rng.normal(size=video.shape[:-1]).astype(np.float32)
+    write_lf(tmp_path / "a.npz", video, disparity=disp)
+    loaded = load_lf(tmp_path / "a.npz")
+    np.testing.assert_array_equal(loaded.lf, video)
+    np.testing.assert_array_equal(loaded.disparity, disp)
+    assert loaded.frames == 2 and loaded.views == (3, 3) and loaded.size == (6, 7)
+
+
+def test_existing_output_is_not_overwritten(tmp_path, rng):
+    lf = random_lf(rng)
+    write_lf(tmp_path / "a.npy", lf)
+    with pytest.raises(LFFileError, match="already exists"):
+        write_lf(tmp_path / "a.npy", lf[::-1])
+    np.testing.assert_array_equal(read_lf(tmp_path / "a.npy"), lf)
+
+
+@pytest.mark.parametrize("name", ["clip.mkv", "clip.mp4"])
+def test_mosaic_video_lossless_round_trip(tmp_path, rng, name):
+    video = random_lf(rng, (3, 2, 3, 8, 10, 3))
+    write_lf(tmp_path / name, video, fps=12)
+    loaded = load_lf(tmp_path / name)
+    assert loaded.format == "video" and loaded.fps == pytest.approx(12)
+    np.testing.assert_array_equal(loaded.lf, video)
+
+
+def test_video_without_grid_needs_grid(tmp_path, rng):
+    video = random_lf(rng, (2, 2, 2, 8, 8, 3))
+    write_video(tmp_path / "plain.mkv", [to_mosaic(f) for f in video])
+    with pytest.raises(LFFormatError, match="grid"):
+        read_lf(tmp_path / "plain.mkv")
+    np.testing.assert_array_equal(read_lf(tmp_path / "plain.mkv", grid=(2, 2)), video)
+
+
+def test_view_videos_and_frames_folders(tmp_path, rng):
+    video = random_lf(rng, (3, 2, 2, 8, 8, 3))
+    views = tmp_path / "views"
+    views.mkdir()
+    for u in range(2):
+        for v in range(2):
+            write_video(views / f"{u}_{v}.mkv", video[:, u, v])
+    loaded = load_lf(views)
+    assert loaded.format == "view-videos"
+    np.testing.assert_array_equal(loaded.lf, video)
+    frames = tmp_path / "frames"
+    write_lf(frames, video)  # one sub-folder per frame
+    loaded = load_lf(frames)
+    assert loaded.format == "frames-folder"
+    np.testing.assert_array_equal(loaded.lf, video)
+
+
+def test_eslf_crop_and_alpha(tmp_path, rng):
+    lf = random_lf(rng, (14, 14, 6, 5, 3))
+    alpha = np.full((14, 14, 6, 5, 1), 255, np.uint8)
+    alpha[0, 0] = 0  # a masked corner view
+    sensor = to_sensor(np.concatenate([lf, alpha], axis=-1))
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "lenslet.png"), cv2.cvtColor(sensor, cv2.COLOR_RGBA2BGRA))
+    loaded = load_lf(tmp_path / "lenslet.png", angular=14)
+    np.testing.assert_array_equal(loaded.lf, lf)
+    assert loaded.weight.shape == (14, 14, 6, 5) and loaded.weight[0, 0].max() == 0 and loaded.weight[1, 1].min() == 1
+    cropped = load_lf(tmp_path / "lenslet.png", angular=14, crop=7)
+    np.testing.assert_array_equal(cropped.lf, lf[4:11, 4:11])
+    with pytest.raises(LFShapeError):
+        read_lf(tmp_path / "lenslet.png", angular=13)
+    with pytest.raises(LFFormatError, match="angular"):
+        read_lf(tmp_path / "lenslet.png")
+
+
+def test_pfm_round_trip(tmp_path, rng):
+    d = rng.normal(size=(7, 9)).astype(np.float32)
+    write_pfm(tmp_path / "d.pfm", d)
+    np.testing.assert_array_equal(read_pfm(tmp_path / "d.pfm"), d)
+    # The file stores rows bottom to top, little-endian (negative scale), like HCI's files.
+    raw = (tmp_path / "d.pfm").read_bytes()
+    assert raw.startswith(b"Pf\n9 7\n-1.0\n")
+    np.testing.assert_array_equal(np.frombuffer(raw[-36:], "<f4"), d[0])
+
+
+def test_bad_inputs_name_the_file(tmp_path, rng):
+    cases = {}
+    cases["missing"] = tmp_path / "nope.npy"
+    (tmp_path / "empty").mkdir()
+    cases["empty"] = tmp_path / "empty"
+    (tmp_path / "junk.png").write_bytes(b"not an image")
+    cases["junk"] = tmp_path / "junk.png"
+    (tmp_path / "bad.npy").write_bytes(b"\x93NUMPY garbage")
+    cases["bad npy"] = tmp_path / "bad.npy"
+    np.save(tmp_path / "wrongshape.npy", np.zeros((4, 4, 3), np.uint8))
+    cases["wrong shape"] = tmp_path / "wrongshape.npy"
+    (tmp_path / "x.xyz").write_text("?")
+    cases["unknown"] = tmp_path / "x.xyz"
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    write_image(mixed / "0_0.png", random_lf(rng, (1, 1, 8, 8, 3))[0, 0])
+    write_image(mixed / "0_1.png", random_lf(rng, (1, 1, 8, 9, 3))[0, 0])
+    cases["mixed sizes"] = mixed
+    notimg = tmp_path / "notimg"
+    notimg.mkdir()
+    (notimg / "0_0.png").write_bytes(b"\x89PNG broken")
+    cases["broken view"] = notimg
+    (tmp_path / "bad.mkv").write_bytes(b"\x1a\x45\xdf\xa3 nonsense")
+    cases["bad video"] = tmp_path / "bad.mkv"
+    (tmp_path / "bad.pfm").write_bytes(b"Pf\n99999999 2\n-1\n")
+    for what, path in cases.items():
+        with pytest.raises(LFStreamError) as info:
+            read_lf(path)
+        assert path.name in str(info.value), what
+    with pytest.raises(LFStreamError, match="bad.pfm"):
+        read_pfm(tmp_path / "bad.pfm")

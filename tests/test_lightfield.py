@@ -1,0 +1,99 @@
+import numpy as np
+import pytest
+import torch
+
+from lfstream.errors import LFShapeError, LFValueError
+from lfstream.lightfield import (
+    aperture_weights,
+    as_float,
+    centre_view,
+    crop_views,
+    dof_image,
+    downsample_angular,
+    from_mosaic,
+    from_sensor,
+    to_mosaic,
+    to_sensor,
+    to_uint8,
+)
+from tests.conftest import random_lf
+
+
+def test_centre_view_is_u_half_v_half(rng):
+    lf = random_lf(rng, (4, 5, 6, 7, 3))
+    np.testing.assert_array_equal(centre_view(lf), lf[2, 2])
+    video = np.stack([lf, lf[::-1]])
+    np.testing.assert_array_equal(centre_view(video)[1], lf[::-1][2, 2])
+
+
+def test_sensor_follows_eq_2_4(rng):
+    # Lp(u + s*N, v + t*N) = L(s, t, u, v) in 0-based form, N = views per axis.
+    lf = random_lf(rng, (3, 4, 5, 6, 3))
+    sensor = to_sensor(lf)
+    assert sensor.shape == (5 * 3, 6 * 4, 3)
+    for s, t, u, v in [(0, 0, 0, 0), (2, 5, 1, 3), (4, 1, 2, 0)]:
+        np.testing.assert_array_equal(sensor[u + s * 3, v + t * 4], lf[u, v, s, t])
+
+
+def test_round_trips_numpy_and_torch(rng):
+    lf = random_lf(rng, (2, 3, 5, 4, 6, 3))  # a video
+    for x in (lf, torch.from_numpy(lf)):
+        back = from_sensor(to_sensor(x), (3, 5))
+        assert type(back) is type(x)
+        np.testing.assert_array_equal(np.asarray(back), lf)
+        back = from_mosaic(to_mosaic(x), (3, 5))
+        np.testing.assert_array_equal(np.asarray(back), lf)
+
+
+def test_mosaic_tiles_views_side_by_side(rng):
+    lf = random_lf(rng, (2, 3, 4, 5, 3))
+    m = to_mosaic(lf)
+    np.testing.assert_array_equal(m[4:8, 10:15], lf[1, 2])
+
+
+def test_crop_keeps_centre(rng):
+    lf = random_lf(rng, (9, 9, 4, 4, 3))
+    c = crop_views(lf, 7)
+    assert c.shape[:2] == (7, 7)
+    np.testing.assert_array_equal(centre_view(c), centre_view(lf))
+    lf14 = random_lf(rng, (14, 14, 2, 2, 3))
+    np.testing.assert_array_equal(centre_view(crop_views(lf14, 7)), centre_view(lf14))
+    with pytest.raises(LFValueError):
+        crop_views(lf, 10)
+
+
+def test_downsample_angular_averages_blocks(rng):
+    lf = random_lf(rng, (4, 4, 3, 3, 3))
+    d = downsample_angular(lf, 2)
+    assert d.shape == (2, 2, 3, 3, 3)
+    expect = lf[2:4, 0:2].astype(np.float32).mean(axis=(0, 1)) / 255
+    np.testing.assert_allclose(d[1, 0], expect, atol=1e-6)
+    dt = downsample_angular(torch.from_numpy(lf), 2)
+    np.testing.assert_allclose(dt.numpy(), d, atol=1e-6)
+
+
+def test_dof_image_full_aperture_and_pinhole(rng):
+    lf = random_lf(rng, (5, 5, 6, 6, 3))
+    np.testing.assert_allclose(dof_image(lf), as_float(lf).mean(axis=(0, 1)), atol=1e-6)
+    pin = aperture_weights((5, 5), radius=0)
+    np.testing.assert_allclose(dof_image(lf, pin), as_float(lf[2, 2]), atol=1e-6)
+    circ = aperture_weights((5, 5), radius=1)
+    assert circ.sum() == 5  # centre + 4 neighbours
+    t = dof_image(torch.from_numpy(lf), torch.from_numpy(circ))
+    np.testing.assert_allclose(t.numpy(), dof_image(lf, circ), atol=1e-6)
+    with pytest.raises(LFValueError):
+        dof_image(lf, np.zeros((5, 5)))
+    with pytest.raises(LFShapeError):
+        dof_image(lf, np.ones((3, 3)))
+
+
+def test_uint8_float_boundary():
+    x = np.array([0, 1, 127, 128, 255], np.uint8)
+    np.testing.assert_array_equal(to_uint8(as_float(x)), x)
+    assert to_uint8(np.array([-1.0, 2.0, np.nan])).tolist() == [0, 255, 0]
+
+
+@pytest.mark.parametrize("bad", [np.zeros((5, 5, 3)), np.zeros((2, 2, 0, 4, 3)), np.zeros((2, 2, 4, 4, 5)), [1, 2]])
+def test_bad_shapes_raise(bad):
+    with pytest.raises(LFShapeError):
+        centre_view(bad)

@@ -1,0 +1,85 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+from lfstream.errors import LFShapeError
+from lfstream.metrics import bpp, dof_psnr, mpsnr, mssim, psnr, ssim
+from tests.conftest import random_lf, shared
+
+
+def _noisy_pair(rng, shape=(40, 50, 3), sigma=20):
+    a = rng.integers(0, 256, size=shape).astype(np.uint8)
+    b = np.clip(a + rng.normal(0, sigma, size=shape), 0, 255).astype(np.uint8)
+    return a, b
+
+
+@pytest.mark.parametrize("sigma", [2, 20, 80])
+def test_agrees_with_scikit_image(rng, sigma):
+    a, b = _noisy_pair(rng, sigma=sigma)
+    ref_ssim = structural_similarity(
+        a, b, gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=255, channel_axis=-1
+    )
+    assert abs(ssim(a, b) - ref_ssim) < 1e-3
+    assert abs(psnr(a, b) - peak_signal_noise_ratio(a, b, data_range=255)) < 0.01
+    # float input in [0, 1] gives the same numbers
+    assert abs(ssim(a / 255.0, b / 255.0) - ref_ssim) < 1e-3
+
+
+def test_on_real_view_pair():
+    from lfstream import read_lf
+
+    lf = read_lf(shared("seahorse5x5", "camImagesFlat"))
+    a, b = lf[2, 2, :200, :200], lf[2, 3, :200, :200]
+    ref = structural_similarity(a, b, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
+                                data_range=255, channel_axis=-1)
+    assert abs(ssim(a, b) - ref) < 1e-3
+
+
+def test_batched_torch_matches_loop(rng, device):
+    a = torch.from_numpy(rng.random((2, 3, 20, 24, 3)).astype(np.float32)).to(device)
+    b = (a + 0.05 * torch.randn_like(a)).clamp(0, 1)
+    batched = ssim(a, b)
+    assert batched.shape == (2, 3)
+    for i in range(2):
+        for j in range(3):
+            assert abs(float(batched[i, j]) - float(ssim(a[i, j], b[i, j]))) < 1e-6
+    assert psnr(a, b).shape == (2, 3)
+
+
+def test_identity_and_symmetry(rng):
+    a, b = _noisy_pair(rng)
+    assert psnr(a, a) == math.inf
+    assert ssim(a, a) == pytest.approx(1.0, abs=1e-9)
+    assert psnr(a, b) == pytest.approx(psnr(b, a))
+    assert ssim(a, b) == pytest.approx(ssim(b, a))
+    const = np.full((16, 16, 3), 7, np.uint8)
+    assert ssim(const, const) == pytest.approx(1.0)
+
+
+def test_lf_metrics_average_views(rng):
+    ref = random_lf(rng, (3, 3, 16, 16, 3))
+    test = np.clip(ref.astype(int) + rng.integers(-9, 10, ref.shape), 0, 255).astype(np.uint8)
+    per_view = [psnr(ref[u, v], test[u, v]) for u in range(3) for v in range(3)]
+    assert mpsnr(ref, test) == pytest.approx(np.mean(per_view))
+    per_view_s = [ssim(ref[u, v], test[u, v]) for u in range(3) for v in range(3)]
+    assert mssim(ref, test) == pytest.approx(np.mean(per_view_s))
+    video = np.stack([ref, test])
+    assert mpsnr(video, video[::-1]).shape == (2,)
+    assert dof_psnr(ref, test) > mpsnr(ref, test)  # averaging views averages the noise away
+
+
+def test_bpp():
+    assert bpp(16000, (7, 7, 375, 540, 3)) == pytest.approx(8 * 16000 / (49 * 375 * 540))
+    assert bpp(100, (2, 7, 7, 10, 10, 3)) == pytest.approx(800 / (2 * 4900))
+    with pytest.raises(LFShapeError):
+        bpp(1, (3, 3))
+
+
+def test_shape_mismatch_raises(rng):
+    with pytest.raises(LFShapeError):
+        psnr(np.zeros((8, 8, 3)), np.zeros((8, 9, 3)))
+    with pytest.raises(LFShapeError):
+        ssim(np.zeros((8, 8, 3)), np.zeros((8, 8, 3)))
