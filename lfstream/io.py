@@ -352,7 +352,7 @@ def write_video(
     """Writes uint8 RGB frames ``(T, H, W, 3)`` to a video file through PyAV.
 
     Lossless: FFV1 (``.mkv``/``.avi``/``.nut``) or x264 RGB at QP 0 (``.mp4``/``.mov``).
-    Lossy: x264 (yuv420p) at ``crf``. The file is written to a temporary name and renamed
+    Lossy: x264 (yuv420p) at ``crf``. ``.gif``: an animated GIF (256-colour). The file is written to a temporary name and renamed
     once the container is closed, so an interrupted write never leaves a broken file.
     """
     import av
@@ -362,18 +362,20 @@ def write_video(
         raise LFValueError(f"{path}: no frames to write")
     h, w = frames[0].shape[:2]
     ext = path.suffix.lower()
-    if ext not in VIDEO_EXTS:
-        raise LFValueError(f"{path}: unsupported video extension; use one of {VIDEO_EXTS}")
-    if lossless:
+    if ext not in VIDEO_EXTS + (".gif",):
+        raise LFValueError(f"{path}: unsupported video extension; use one of {VIDEO_EXTS + ('.gif',)}")
+    if ext == ".gif":
+        codec, pix_fmt, options = "gif", "rgb8", {}
+    elif lossless:
         codec, pix_fmt, options = ("ffv1", "bgr0", {}) if ext in (".mkv", ".avi", ".nut") else (
             "libx264rgb",
             "rgb24",
             {"qp": "0", "preset": "veryfast"},
         )
     else:
-        if h % 2 or w % 2:
-            raise LFShapeError(f"{path}: lossy yuv420p video needs even frame sizes, got {h}x{w}")
-        codec, pix_fmt, options = "libx264", "yuv420p", {"crf": str(crf), "preset": "medium"}
+        # 4:2:0 needs even sizes; odd-sized frames keep full chroma instead of being cropped.
+        pix_fmt = "yuv420p" if h % 2 == 0 and w % 2 == 0 else "yuv444p"
+        codec, options = "libx264", {"crf": str(crf), "preset": "medium"}
     tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{ext}")
     rate = Fraction(fps).limit_denominator(1001)
     try:

@@ -1,0 +1,92 @@
+"""Fused CPU kernels compiled by numba.
+
+Why numba (the one dependency beyond the brief's list): shift-and-sum refocusing is a
+per-pixel loop with an integer offset and four fixed weights per view. Torch executes one
+operation at a time, so each tap of each view is a full pass over memory: measured on the
+2-core development machine, a 16-plane 7x7x375x540 stack takes 0.47 s with separable,
+in-place torch ops and 0.10 s with this fused loop, which reads each source row from cache
+once per plane. Kernels compile on first use (a few seconds) and are cached on disk.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_PARALLEL = dict(parallel=True, fastmath=True, cache=True, nogil=True)
+
+
+@numba.njit(fastmath=True, cache=True, inline="always")
+def _axpy2(acc, s0, s1, a, b):  # pragma: no cover - compiled
+    # Loops start at 0 on sliced arrays so numba can drop its negative-index checks and
+    # LLVM vectorises the body.
+    for j in range(acc.shape[0]):
+        acc[j] += a * np.float32(s0[j]) + b * np.float32(s1[j])
+
+
+@numba.njit(fastmath=True, cache=True, inline="always")
+def _axpy1(acc, s0, a):  # pragma: no cover - compiled
+    for j in range(acc.shape[0]):
+        acc[j] += a * np.float32(s0[j])
+
+
+@numba.njit(fastmath=True, cache=True, inline="always")
+def _add_shifted_row(acc, src, a, b, o0, channels):  # pragma: no cover - compiled
+    """acc[j] += a*src[j+o0] + b*src[j+o0+channels] where each source index exists."""
+    wc = acc.shape[0]
+    o1 = o0 + channels
+    lo0, hi0 = max(0, -o0), min(wc, wc - o0)
+    lo1, hi1 = max(0, -o1), min(wc, wc - o1)
+    lo, hi = max(lo0, lo1), min(hi0, hi1)
+    if hi > lo:
+        _axpy2(acc[lo:hi], src[lo + o0 : hi + o0], src[lo + o1 : hi + o1], a, b)
+        if lo0 < lo:
+            _axpy1(acc[lo0:lo], src[lo0 + o0 : lo + o0], a)
+        if hi0 > hi:
+            _axpy1(acc[hi:hi0], src[hi + o0 : hi0 + o0], a)
+        if lo1 < lo:
+            _axpy1(acc[lo1:lo], src[lo1 + o1 : lo + o1], b)
+        if hi1 > hi:
+            _axpy1(acc[hi:hi1], src[hi + o1 : hi1 + o1], b)
+    else:
+        if hi0 > lo0:
+            _axpy1(acc[lo0:hi0], src[lo0 + o0 : hi0 + o0], a)
+        if hi1 > lo1:
+            _axpy1(acc[lo1:hi1], src[lo1 + o1 : hi1 + o1], b)
+
+
+@numba.njit(**_PARALLEL)
+def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, out):  # pragma: no cover - compiled
+    """Weighted, unnormalised, bilinear shift-and-sum of views; zero outside each view.
+
+    Args:
+        lf: (U, V, H, W*C) uint8 or float32, rows flattened channels-last so a shift by one
+            pixel is a shift by ``channels`` elements.
+        weights: (U, V) float32 view weights.
+        y_int, y_frac: (K, U) source-row offset (int64) and fraction (float32) per plane.
+        x_int, x_frac: (K, V) source-pixel offset and fraction per plane.
+        out: (K, H, W*C) float32, overwritten with
+            ``sum_uv w_uv * bilinear(lf[u, v], y + y_int + y_frac, x + x_int + x_frac)``.
+    """
+    n_u, n_v, h, _ = lf.shape
+    n_k = out.shape[0]
+    for y in numba.prange(h):
+        for k in range(n_k):
+            acc = out[k, y]
+            acc[:] = 0.0
+            for u in range(n_u):
+                fy = y_frac[k, u]
+                for tap in range(2):
+                    wy = (1.0 - fy) if tap == 0 else fy
+                    sy = y + y_int[k, u] + tap
+                    if wy == 0.0 or sy < 0 or sy >= h:
+                        continue
+                    for v in range(n_v):
+                        wv = weights[u, v] * wy
+                        if wv == 0.0:
+                            continue
+                        fx = x_frac[k, v]
+                        _add_shifted_row(
+                            acc, lf[u, v, sy], np.float32(wv * (1.0 - fx)), np.float32(wv * fx),
+                            x_int[k, v] * channels, channels,
+                        )
