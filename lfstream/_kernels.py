@@ -56,8 +56,8 @@ def _add_shifted_row(acc, src, a, b, o0, channels):  # pragma: no cover - compil
 
 
 @numba.njit(**_PARALLEL)
-def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, out):  # pragma: no cover - compiled
-    """Weighted, unnormalised, bilinear shift-and-sum of views; zero outside each view.
+def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, col_cover, scale, out):  # pragma: no cover - compiled
+    """Weighted, coverage-normalised, bilinear shift-and-sum of views; zero outside each view.
 
     Args:
         lf: (U, V, H, W*C) uint8 or float32, rows flattened channels-last so a shift by one
@@ -65,15 +65,21 @@ def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, out):  #
         weights: (U, V) float32 view weights.
         y_int, y_frac: (K, U) source-row offset (int64) and fraction (float32) per plane.
         x_int, x_frac: (K, V) source-pixel offset and fraction per plane.
+        col_cover: (K, U, W) float32, ``sum_v w_uv * (x-tap weight of view v inside the image)``;
+            with the y taps it gives each pixel's coverage, the weight that really contributed.
+        scale: value range of ``lf`` (255 for uint8), divided out.
         out: (K, H, W*C) float32, overwritten with
-            ``sum_uv w_uv * bilinear(lf[u, v], y + y_int + y_frac, x + x_int + x_frac)``.
+            ``sum_uv w_uv * bilinear(lf[u, v], y + y_int + y_frac, x + x_int + x_frac) / (scale * coverage)``
+            and 0 where nothing covers the pixel.
     """
     n_u, n_v, h, _ = lf.shape
-    n_k = out.shape[0]
+    n_k, n_w = col_cover.shape[0], col_cover.shape[2]
     for y in numba.prange(h):
+        cover = np.empty(n_w, np.float32)
         for k in range(n_k):
             acc = out[k, y]
             acc[:] = 0.0
+            cover[:] = 0.0
             for u in range(n_u):
                 fy = y_frac[k, u]
                 for tap in range(2):
@@ -81,6 +87,7 @@ def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, out):  #
                     sy = y + y_int[k, u] + tap
                     if wy == 0.0 or sy < 0 or sy >= h:
                         continue
+                    _axpy1(cover, col_cover[k, u], np.float32(wy))
                     for v in range(n_v):
                         wv = weights[u, v] * wy
                         if wv == 0.0:
@@ -90,3 +97,7 @@ def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, out):  #
                             acc, lf[u, v, sy], np.float32(wv * (1.0 - fx)), np.float32(wv * fx),
                             x_int[k, v] * channels, channels,
                         )
+            for x in range(n_w):
+                f = np.float32(1.0 / (scale * cover[x])) if cover[x] > 1e-6 else np.float32(0.0)
+                for ch in range(channels):
+                    acc[x * channels + ch] *= f

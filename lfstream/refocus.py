@@ -96,17 +96,18 @@ def _tap_offsets(slopes: np.ndarray, n: int, size: int) -> tuple[np.ndarray, np.
     return i.astype(np.int64), (src - i).astype(np.float32)
 
 
+def _axis_cover(ints: np.ndarray, fracs: np.ndarray, size: int) -> np.ndarray:
+    """``(K, n, size)`` weight of each view's two bilinear taps that fall inside the image."""
+    pos = np.arange(size)[None, None, :] + ints[:, :, None]
+    inside0 = (pos >= 0) & (pos < size)
+    inside1 = (pos + 1 >= 0) & (pos + 1 < size)
+    return ((1 - fracs)[:, :, None] * inside0 + fracs[:, :, None] * inside1).astype(np.float32)
+
+
 def _coverage(y_int, y_frac, x_int, x_frac, w: np.ndarray, h: int, wd: int) -> np.ndarray:
     """Sum of contributing weights per output pixel, ``(K, H, W)`` float32 (separable)."""
-
-    def axis_cov(ints, fracs, size):
-        pos = np.arange(size)[None, None, :] + ints[:, :, None]  # (K, n, size)
-        inside0 = (pos >= 0) & (pos < size)
-        inside1 = (pos + 1 >= 0) & (pos + 1 < size)
-        return (1 - fracs)[:, :, None] * inside0 + fracs[:, :, None] * inside1
-
-    cy = axis_cov(y_int, y_frac, h).astype(np.float32)  # (K, U, H)
-    cx = axis_cov(x_int, x_frac, wd).astype(np.float32)  # (K, V, W)
+    cy = _axis_cover(y_int, y_frac, h)  # (K, U, H)
+    cx = _axis_cover(x_int, x_frac, wd)  # (K, V, W)
     return np.einsum("kuh,uv,kvw->khw", cy, w, cx, optimize=True)
 
 
@@ -122,15 +123,14 @@ def _sas_frame_numpy(lf: np.ndarray, slopes: np.ndarray, w: np.ndarray) -> np.nd
         lf = lf.astype(np.float32)
     y_int, y_frac = _tap_offsets(slopes, u, h)
     x_int, x_frac = _tap_offsets(slopes, v, wd)
-    out = np.empty((len(slopes), h, wd * c), np.float32)
-    shift_sum_rows(np.ascontiguousarray(lf).reshape(u, v, h, wd * c), c, w, y_int, y_frac, x_int, x_frac, out)
-    cov = _coverage(y_int, y_frac, x_int, x_frac, w, h, wd)
-    out = out.reshape(len(slopes), h, wd, c)
+    # Broadcasting, not einsum: a BLAS call here leaves OpenBLAS threads spinning that then
+    # compete with the kernel's threads (measured: 0.18 s instead of 0.12 s).
+    col_cover = (w[None, :, :, None] * _axis_cover(x_int, x_frac, wd)[:, None, :, :]).sum(axis=2)
     scale = 255.0 if lf.dtype == np.uint8 else 1.0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        norm = np.where(cov > 1e-6, 1.0 / (cov * scale), 0.0).astype(np.float32)
-    out *= norm[..., None]
-    return out
+    out = np.empty((len(slopes), h, wd * c), np.float32)
+    shift_sum_rows(np.ascontiguousarray(lf).reshape(u, v, h, wd * c), c, w, y_int, y_frac, x_int, x_frac,
+                   col_cover.astype(np.float32), scale, out)
+    return out.reshape(len(slopes), h, wd, c)
 
 
 def _shift_axis_add(acc: torch.Tensor, src: torch.Tensor, offset: int, frac: float, weight: float, dim: int) -> None:
@@ -197,6 +197,8 @@ def shift_and_sum(
             arr = lf.numpy() if lf.dtype in (torch.uint8, torch.float32) else lf.float().numpy()
             return torch.from_numpy(shift_and_sum(arr, s, w))
         res = torch.stack([_sas_frame_torch(f, s, w) for f in frames])
+    elif lf.ndim == 5:
+        return _sas_frame_numpy(np.asarray(lf), s, w)
     else:
         res = np.stack([_sas_frame_numpy(np.asarray(f), s, w) for f in frames])
     return res if lf.ndim == 6 else res[0]
