@@ -129,7 +129,8 @@ def _texture(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
         x0 = int(rng.integers(0, big.shape[1] - w + 1))
         return np.ascontiguousarray(big[y0 : y0 + h, x0 : x0 + w])
     base = rng.random(3).astype(np.float32)
-    tint = rng.random(3).astype(np.float32)
+    # the second colour is roughly the complement of the first, so every pattern has contrast
+    tint = np.clip(1.0 - base + rng.uniform(-0.2, 0.2, 3), 0, 1).astype(np.float32)
     n = _value_noise(rng, h, w)
     if kind == 1:  # stripes with noise, strong orientation for disparity cues
         yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
@@ -176,6 +177,17 @@ class _Layer:
     disparity: float  # at the canvas centre
     gradient: tuple[float, float]  # d(disparity)/dy, d/dx in centre-view pixels
     velocity: tuple[float, float]  # pixels per frame (y, x)
+
+    @property
+    def bbox(self) -> tuple[int, int, int, int]:
+        """(y0, y1, x0, x1) of the mask's support on the canvas, or the whole canvas."""
+        if not hasattr(self, "_bbox"):
+            if self.mask is None:
+                self._bbox = (0, self.texture.shape[0], 0, self.texture.shape[1])
+            else:
+                ys, xs = np.nonzero(self.mask > 0)
+                self._bbox = (int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1) if ys.size else (0, 0, 0, 0)
+        return self._bbox
 
     @property
     def rgba(self) -> np.ndarray:
@@ -230,12 +242,12 @@ def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
     cy, cx = (h - 1) / 2.0, (w - 1) / 2.0
 
     layers: list[_Layer] = []
-    bg_d = far + 0.15 * (near - far) * rng.random()
-    if config.slanted_background:
-        span = 0.3 * (near - far)
-        grad = (rng.uniform(-span, span) / max(h, 1), rng.uniform(-span, span) / max(w, 1))
-    else:
-        grad = (0.0, 0.0)
+    # The slanted background stays inside [far, near] over every pixel any view sees: its
+    # disparity varies by at most `span` over the image plus the parallax margin.
+    span = 0.15 * (near - far) if config.slanted_background else 0.0
+    bg_d = far + span + 0.15 * (near - far) * rng.random()
+    reach_y, reach_x = h / 2 + abs(near) * u0 + 1, w / 2 + abs(near) * u0 + 1
+    grad = (rng.uniform(-0.5, 0.5) * span / reach_y, rng.uniform(-0.5, 0.5) * span / reach_x)
     layers.append(_Layer(_texture(rng, hb, wb), None, bg_d, grad, (0.0, 0.0)))
     depths = np.sort(rng.uniform(bg_d + 0.2 * (near - bg_d), near, config.layers))  # back to front
     for d in depths:
@@ -247,7 +259,6 @@ def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     vig = _vignetting_gains(n, h, w, config.vignetting)
     views = np.empty((n, n, h, w, 3), np.float32)
-    tmp = np.empty((h, w, 3), np.float32)
     for t in range(t_n):
         for u in range(n):
             for v in range(n):
@@ -259,18 +270,27 @@ def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
                     m, (dc, dy, dx) = _view_warp(layer, u - u0, v - u0, off, cy, cx, margin)
                     # m maps view pixels to canvas pixels, hence WARP_INVERSE_MAP; texture and
                     # mask travel together in one 4-channel warp.
-                    warped = cv2.warpAffine(layer.rgba, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                            borderMode=cv2.BORDER_REFLECT)
-                    dl = dc if dy == 0 and dx == 0 else dc + dy * yy + dx * xx
                     if layer.mask is None:
+                        warped = cv2.warpAffine(layer.rgba, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                                borderMode=cv2.BORDER_REFLECT)
                         img[:] = warped[..., :3]
-                        dmap[:] = dl
+                        dmap[:] = dc if dy == 0 and dx == 0 else dc + dy * yy + dx * xx
                         continue
-                    a = warped[..., 3:]
-                    np.subtract(warped[..., :3], img, out=tmp)
-                    tmp *= a
-                    img += tmp
-                    np.copyto(dmap, dl, where=a[..., 0] > 0.5)
+                    # Shapes are fronto-parallel (a pure translation): warp only the view
+                    # rectangle their support lands in.
+                    by0, by1, bx0, bx1 = layer.bbox
+                    ry0, ry1 = max(0, int(np.floor(by0 - m[1, 2])) - 1), min(h, int(np.ceil(by1 - m[1, 2])) + 1)
+                    rx0, rx1 = max(0, int(np.floor(bx0 - m[0, 2])) - 1), min(w, int(np.ceil(bx1 - m[0, 2])) + 1)
+                    if ry1 <= ry0 or rx1 <= rx0:
+                        continue
+                    mr = m.copy()
+                    mr[:, 2] += m[:, :2] @ np.array([rx0, ry0], np.float64)
+                    warped = cv2.warpAffine(layer.rgba, mr, (rx1 - rx0, ry1 - ry0),
+                                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderValue=0.0)
+                    a = np.ascontiguousarray(warped[..., 3])
+                    roi = img[ry0:ry1, rx0:rx1]
+                    roi += a[..., None] * (warped[..., :3] - roi)  # "over" compositing
+                    np.copyto(dmap[ry0:ry1, rx0:rx1], np.float32(dc), where=a > 0.5)
         gain = 1.0 + config.exposure_drift * np.sin(2 * np.pi * t / max(t_n, 2))
         if gain != 1.0:
             views *= gain
@@ -296,14 +316,12 @@ def _vignetting_gains(n: int, h: int, w: int, strength: float) -> np.ndarray | N
 
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     r = np.hypot((yy - (h - 1) / 2) / (h / 2), (xx - (w - 1) / 2) / (w / 2)) / np.sqrt(2)  # 0 centre, 1 corner
-    gains = np.empty((n, n, h, w), np.float32)
     c = n // 2
-    for u in range(n):
-        for v in range(n):
-            # views further from the centre lose more light (mechanical vignetting of the main lens)
-            rv = np.hypot(u - c, v - c) / max(np.hypot(c, c), 1)
-            gains[u, v] = radial_falloff(r * (0.5 + rv), 1.0, 2.0 * strength) * (1 - 0.6 * strength * rv**4)
-    return gains
+    du, dv = np.meshgrid(np.arange(n) - c, np.arange(n) - c, indexing="ij")
+    rv = (np.hypot(du, dv) / max(np.hypot(c, c), 1)).astype(np.float32)  # 0 centre view, 1 corner view
+    # views further from the centre lose more light (the main lens's mechanical vignetting)
+    falloff = radial_falloff(r[None, None] * (0.5 + rv[:, :, None, None]), 1.0, 2.0 * strength).astype(np.float32)
+    return falloff * (1 - 0.6 * strength * rv**4)[:, :, None, None]
 
 
 def synth_clip(frames: int = 1, views: int = 7, size: tuple[int, int] = (128, 128), seed: int = 0, **options) -> SynthClip:

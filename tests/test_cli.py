@@ -1,0 +1,104 @@
+"""The command line, called through main(argv) as users' scripts would."""
+
+import json
+
+import numpy as np
+import pytest
+
+from lfstream.cli import build_parser, main
+from tests.conftest import random_lf, shared
+
+
+def run(capsys, *argv):
+    code = main(list(map(str, argv)))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_help_lists_every_command(capsys):
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    names = set(sub.choices)
+    assert {"info", "refocus", "synth", "demo"} <= names
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    for name in names:
+        assert name in text
+        with pytest.raises(SystemExit) as e:
+            main([name, "--help"])
+        assert e.value.code == 0
+        assert "usage: lfstream " + name in capsys.readouterr().out
+
+
+def test_info_json_on_seahorse(capsys):
+    code, out, _ = run(capsys, "info", shared("seahorse5x5", "camImagesFlat"), "--json")
+    assert code == 0
+    info = json.loads(out)
+    assert info["format"] == "sai-folder" and info["frames"] == 1
+    assert info["views"] == [5, 5] and info["size"] == [500, 500]
+    assert info["dtype"] == "uint8" and info["bytes"] == 25 * 500 * 500 * 3
+
+
+def test_info_hci_missing_views_is_one_line_error(capsys):
+    code, out, err = run(capsys, "info", shared("hci_star", "cotton"))
+    assert code != 0 and out == ""
+    assert len(err.strip().splitlines()) == 1 and "missing" in err and "cotton" in err
+    code, out, _ = run(capsys, "info", shared("hci_star", "cotton"), "--allow-missing", "--json")
+    assert code == 0 and len(json.loads(out)["missing_views"]) == 48
+
+
+@pytest.mark.parametrize("bad", ["nonexistent.npy", "."])
+def test_bad_input_one_line(capsys, tmp_path, bad):
+    path = tmp_path / bad if bad != "." else tmp_path
+    code, _, err = run(capsys, "info", path)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_synth_then_info_then_refocus(capsys, tmp_path):
+    clip = tmp_path / "clip.npz"
+    code, _, _ = run(capsys, "synth", clip, "--frames", 2, "--views", 5, "--size", "32x40", "--seed", 3)
+    assert code == 0
+    code, out, _ = run(capsys, "info", clip, "--json")
+    info = json.loads(out)
+    assert info["frames"] == 2 and info["views"] == [5, 5] and info["size"] == [32, 40] and info["has_disparity"]
+    out_dir = tmp_path / "stack"
+    code, out, _ = run(capsys, "refocus", clip, "-o", out_dir, "--alphas", "0.8,1,1.25", "--json")
+    assert code == 0
+    summary = json.loads(out)
+    assert summary["frames"] == 2 and [p["alpha"] for p in summary["planes"]] == pytest.approx([0.8, 1.0, 1.25])
+    assert sorted(p.name for p in (out_dir / "frame_000001").iterdir()) == ["plane_00.png", "plane_01.png", "plane_02.png"]
+    assert (out_dir / "plane_02.mp4").stat().st_size > 0
+    # refusing to write into a non-empty folder keeps what is there
+    code, _, err = run(capsys, "refocus", clip, "-o", out_dir)
+    assert code == 2 and "already exists" in err
+    # synth never overwrites
+    code, _, err = run(capsys, "synth", clip)
+    assert code == 2 and "exists" in err
+
+
+def test_refocus_single_frame_writes_sweeps(capsys, tmp_path, rng):
+    from lfstream import write_lf
+
+    lf = random_lf(rng, (3, 3, 24, 30, 3))
+    write_lf(tmp_path / "lf.npy", lf)
+    code, _, _ = run(capsys, "refocus", tmp_path / "lf.npy", "-o", tmp_path / "o", "--slope-range", "-1", "1", "5",
+                     "--method", "fourier")
+    assert code == 0
+    names = sorted(p.name for p in (tmp_path / "o").iterdir())
+    assert names == [f"plane_{k:02d}.png" for k in range(5)] + ["sweep.gif", "sweep.mp4"]
+    from lfstream.io import iter_video_frames
+
+    assert len(list(iter_video_frames(tmp_path / "o" / "sweep.mp4"))) == 5
+
+
+def test_demo_runs_and_never_overwrites(capsys, tmp_path):
+    out = tmp_path / "demo"
+    code, out_text, _ = run(capsys, "demo", "-o", out, "--size", "48x64", "--json")
+    assert code == 0
+    first = json.loads(out_text)
+    assert first["lightfield"]["views"] == [7, 7] and (out / "focal_sweep.mp4").exists()
+    assert min(first["fourier_vs_sas_psnr_db"]) > 25
+    code, out_text, _ = run(capsys, "demo", "-o", out, "--size", "48x64", "--json")
+    assert json.loads(out_text)["output"] == str(tmp_path / "demo-2")
