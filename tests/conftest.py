@@ -42,3 +42,19 @@ def rng() -> np.random.Generator:
 
 def random_lf(rng: np.random.Generator, shape=(3, 5, 12, 16, 3)) -> np.ndarray:
     return rng.integers(0, 256, size=shape, dtype=np.uint8)
+
+
+def shifted_views(lf: np.ndarray, idx, slope: float) -> np.ndarray:
+    """The listed views (u, v) of ``lf`` (U, V, H, W[, C]) resampled at (y - slope*du, x - slope*dv),
+    i.e. aligned to the centre view for content at disparity ``slope``: (n, H, W[, C]) float32."""
+    import cv2
+
+    from lfstream.lightfield import as_float
+
+    u0, v0 = lf.shape[0] // 2, lf.shape[1] // 2
+    out = []
+    for u, v in idx:
+        m = np.float32([[1, 0, -slope * (v - v0)], [0, 1, -slope * (u - u0)]])
+        out.append(cv2.warpAffine(as_float(lf[u, v]), m, (lf.shape[3], lf.shape[2]),
+                                  flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP))
+    return np.stack(out)

@@ -18,7 +18,7 @@ from lfstream.refocus import (
     shift_and_sum,
 )
 from lfstream.synth import fronto_parallel_plane
-from tests.conftest import random_lf, shared
+from tests.conftest import random_lf, shared, shifted_views
 
 
 def reference_sas(lf: np.ndarray, slopes, weights=None) -> np.ndarray:
@@ -117,7 +117,7 @@ def test_hci_views_align_under_the_convention(scene):
         idx = np.argwhere(mask)
         costs = []
         for s in slopes:
-            shifted = shift_and_sum_views(patch, idx, s)
+            shifted = shifted_views(patch, idx, s)[:, 8:-8, 8:-8]
             costs.append(shifted.var(axis=0).mean())
         return slopes[int(np.argmin(costs))]
 
@@ -131,19 +131,6 @@ def test_hci_views_align_under_the_convention(scene):
         for name, s in found.items():
             assert s == pytest.approx(found["row"], abs=0.2), (scene, y0, x0, found)
     assert checked >= 2, f"{scene}: too few patches away from the focal plane to check the sign"
-
-
-def shift_and_sum_views(patch, idx, slope):
-    """Each listed view of a patch resampled at (y - slope*du, x - slope*dv): (n, h-16, w-16, 3)."""
-    import cv2
-
-    out = []
-    for u, v in idx:
-        m = np.float32([[1, 0, -slope * (v - 4)], [0, 1, -slope * (u - 4)]])
-        img = cv2.warpAffine(as_float(patch[u, v]), m, (patch.shape[3], patch.shape[2]),
-                             flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
-        out.append(img[8:-8, 8:-8])
-    return np.stack(out)
 
 
 def test_fourier_matches_sas_and_precision(rng):
