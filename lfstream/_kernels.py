@@ -14,6 +14,8 @@ import numba
 import numpy as np
 
 _PARALLEL = dict(parallel=True, fastmath=True, cache=True, nogil=True)
+_HOLE = np.float32(-3.0e38)  # marks view pixels no centre pixel lands on
+_HOLE_TEST = np.float32(-1.0e38)
 
 
 @numba.njit(fastmath=True, cache=True, inline="always")
@@ -101,3 +103,91 @@ def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, col_cove
                 f = np.float32(1.0 / (scale * cover[x])) if cover[x] > 1e-6 else np.float32(0.0)
                 for ch in range(channels):
                     acc[x * channels + ch] *= f
+
+
+@numba.njit(fastmath=True, cache=True, inline="always")
+def _bilinear_into(centre, sy, sx, out_px):  # pragma: no cover - compiled
+    h, w, c = centre.shape
+    sy = min(max(sy, 0.0), h - 1.0)
+    sx = min(max(sx, 0.0), w - 1.0)
+    y0 = min(int(sy), max(h - 2, 0))
+    x0 = min(int(sx), max(w - 2, 0))
+    y1 = min(y0 + 1, h - 1)
+    x1 = min(x0 + 1, w - 1)
+    fy = sy - y0
+    fx = sx - x0
+    for ch in range(c):
+        val = ((1 - fy) * ((1 - fx) * centre[y0, x0, ch] + fx * centre[y0, x1, ch])
+               + fy * ((1 - fx) * centre[y1, x0, ch] + fx * centre[y1, x1, ch]))
+        out_px[ch] = np.uint8(min(max(val * 255.0 + 0.5, 0.0), 255.0))
+
+
+@numba.njit(**_PARALLEL)
+def warp_centre_to_views(centre, disp, n_u, n_v, occlusion, out):  # pragma: no cover - compiled
+    """Backward-warps the centre view into every view: L(x, u) = C(x + (u - u0) * d_u(x)).
+
+    Args:
+        centre: (H, W, C) float32 in [0, 1].
+        disp: (H, W) float32 disparity of the centre view (lfstream's HCI sign).
+        occlusion: if True, each view's disparity d_u is the centre map forward-splatted
+            into the view (nearest pixel) with a z-test, the nearer surface winning. View
+            pixels no centre pixel lands on are disoccluded: the centre view never saw them,
+            so they are filled along the row from the background side (the neighbour with
+            the smaller disparity), extending the background instead of copying the
+            occluder's texture. If False, d_u is the centre map at the view pixel.
+        out: (U, V, H, W, C) uint8, overwritten.
+    """
+    h, w, c = centre.shape
+    u0, v0 = n_u // 2, n_v // 2
+    for k in numba.prange(n_u * n_v):
+        u = k // n_v
+        v = k % n_v
+        du = np.float32(u - u0)
+        dv = np.float32(v - v0)
+        view = out[u, v]
+        if not occlusion or (u == u0 and v == v0):
+            for y in range(h):
+                for x in range(w):
+                    d = disp[y, x]
+                    _bilinear_into(centre, y + d * du, x + d * dv, view[y, x])
+            continue
+        # a finite sentinel, not -inf: fastmath lets LLVM assume no infinities
+        dview = np.full((h, w), _HOLE, np.float32)
+        for y in range(h):
+            for x in range(w):
+                d = disp[y, x]
+                iy = int(np.floor(y - d * du + 0.5))
+                ix = int(np.floor(x - d * dv + 0.5))
+                if 0 <= iy < h and 0 <= ix < w and d > dview[iy, ix]:
+                    dview[iy, ix] = d
+        for y in range(h):
+            row = dview[y]
+            for x in range(w):
+                d = row[x]
+                if d > _HOLE_TEST:
+                    _bilinear_into(centre, y + d * du, x + d * dv, view[y, x])
+            # disoccluded runs: copy the nearest valid pixel on the background side
+            x = 0
+            while x < w:
+                if row[x] > _HOLE_TEST:
+                    x += 1
+                    continue
+                start = x
+                while x < w and row[x] <= _HOLE_TEST:
+                    x += 1
+                left = start - 1
+                right = x
+                if left < 0 and right >= w:
+                    for xx in range(start, x):  # a whole row unseen: fall back to the centre map
+                        d = disp[y, xx]
+                        _bilinear_into(centre, y + d * du, xx + d * dv, view[y, xx])
+                    continue
+                if left < 0:
+                    src = right
+                elif right >= w:
+                    src = left
+                else:
+                    src = left if row[left] <= row[right] else right
+                for xx in range(start, x):
+                    for ch in range(c):
+                        view[y, xx, ch] = view[y, src, ch]

@@ -269,3 +269,93 @@ def _optics(args: argparse.Namespace) -> int:
         alpha = f"{p.alpha:.4g}" if p.alpha is not None else "-"
         print(f"  slope {p.slope:+.4g} (alpha {alpha}): focus {p.focus_m:.3g} m, depth of field {p.dof_near_m:.3g} .. {p.dof_far_m:.3g} m")
     return 0
+
+
+# ----------------------------------------------------------------------------------------
+# encode / decode
+
+
+@command("encode", "encode a light field or LF video to an .lfs stream (JPEG centre view)")
+def _encode_args(p: argparse.ArgumentParser) -> Handler:
+    p.add_argument("input", type=Path)
+    p.add_argument("-o", "--output", type=Path, required=True, help="the .lfs file (never overwritten without --overwrite)")
+    p.add_argument("--quality", type=int, default=50, help="JPEG quality of the centre view (default 50)")
+    p.add_argument("--depth-hint", action="store_true", help="also send the encoder's disparity estimate")
+    p.add_argument("--fps", type=float, help="frame rate to record (default: the input's, else 30)")
+    p.add_argument("--overwrite", action="store_true")
+    add_read_options(p)
+    p.add_argument("--json", action="store_true")
+    return _encode
+
+
+def _encode(args: argparse.Namespace) -> int:
+    from lfstream.codec import Encoder, encode_file
+    from lfstream.metrics import bpp
+
+    if args.output.exists() and not args.overwrite:
+        raise LFFileError(f"{args.output}: already exists (pass --overwrite to replace it)")
+    loaded = load_from_args(args)
+    if loaded.present is not None:
+        raise LFValueError(f"{args.input}: the encoder needs every view (the centre view at least); "
+                           "missing views cannot be encoded")
+    frames = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
+    enc = Encoder(quality=args.quality, depth_hint=args.depth_hint)
+    stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), enc,
+                        fps=args.fps or loaded.fps or 30.0)
+    stats.update({"output": str(args.output), "bpp": bpp(stats["bytes"], frames.shape),
+                  "hint_bpp": bpp(stats["hint_bytes"], frames.shape), "quality": args.quality})
+    if args.json:
+        emit_json(stats)
+    else:
+        print(f"{stats['frames']} frame(s) -> {args.output}: {stats['bytes']} bytes, {stats['bpp']:.5f} bpp"
+              + (f" (hint {stats['hint_bpp']:.5f} bpp)" if args.depth_hint else "")
+              + f", encoded in {stats['encode_s']:.3f} s")
+    return 0
+
+
+@command("decode", "decode an .lfs stream to a light field (.npy, folder or video)")
+def _decode_args(p: argparse.ArgumentParser) -> Handler:
+    p.add_argument("input", type=Path)
+    p.add_argument("-o", "--output", type=Path, required=True, help=".npy (T,U,V,H,W,3), .npz, a video or a folder")
+    p.add_argument("--depth", choices=("auto", "hint", "flat", "net"), default="auto",
+                   help="disparity source: the stream's hint, flat (zero), or Depth-Net (default: hint if present)")
+    p.add_argument("--no-occlusion", action="store_true", help="warp without occlusion-aware per-view disparity")
+    p.add_argument("--disparity-out", type=Path, help="folder for the centre-view disparity of each frame (PFM)")
+    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--json", action="store_true")
+    return _decode
+
+
+def _decode(args: argparse.Namespace) -> int:
+    from lfstream.codec import iter_decode
+    from lfstream.errors import BitstreamError
+    from lfstream.io import write_lf, write_pfm
+
+    if args.output.exists() and not args.overwrite:
+        raise LFFileError(f"{args.output}: already exists (pass --overwrite to replace it)")
+    if args.disparity_out is not None:
+        args.disparity_out.mkdir(parents=True, exist_ok=True)
+    frames, error = [], None
+    t0 = time.perf_counter()
+    try:
+        with open(args.input, "rb") as fh:
+            for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion):
+                frames.append(f.lf)
+                if args.disparity_out is not None:
+                    write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
+    except OSError as exc:
+        raise LFFileError(f"{args.input}: cannot read ({exc.strerror or exc})") from exc
+    except BitstreamError as exc:
+        error = exc
+    decode_s = time.perf_counter() - t0
+    if frames:
+        # a damaged stream still gives a valid output of every frame before the damage
+        write_lf(args.output, np.stack(frames), overwrite=args.overwrite)
+    if error is not None:
+        raise BitstreamError(f"{args.input}: {error} ({len(frames)} complete frame(s) before it written to {args.output})")
+    result = {"frames": len(frames), "decode_s": decode_s, "output": str(args.output)}
+    if args.json:
+        emit_json(result)
+    else:
+        print(f"{len(frames)} frame(s) decoded in {decode_s:.3f} s -> {args.output}")
+    return 0

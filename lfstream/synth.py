@@ -271,9 +271,8 @@ def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
                     # m maps view pixels to canvas pixels, hence WARP_INVERSE_MAP; texture and
                     # mask travel together in one 4-channel warp.
                     if layer.mask is None:
-                        warped = cv2.warpAffine(layer.rgba, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                                borderMode=cv2.BORDER_REFLECT)
-                        img[:] = warped[..., :3]
+                        cv2.warpAffine(layer.texture, m, (w, h), dst=img, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                       borderMode=cv2.BORDER_REFLECT)
                         dmap[:] = dc if dy == 0 and dx == 0 else dc + dy * yy + dx * xx
                         continue
                     # Shapes are fronto-parallel (a pure translation): warp only the view
@@ -299,15 +298,20 @@ def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
         if config.noise > 0:
             # shot noise (variance grows with the signal) plus read noise: `noise` 8-bit levels
             # of standard deviation at mid-grey, half of it in the dark
-            std = np.sqrt(0.25 + 1.5 * np.clip(views, 0, 1)) * np.float32(config.noise / 255.0)
-            views += rng.standard_normal(views.shape, dtype=np.float32) * std
-        np.multiply(views, 255.0, out=views)
-        views += 0.5
-        np.clip(views, 0, 255, out=views)
-        lf[t] = views
+            std = np.clip(views, 0.0, 1.0)
+            std *= 1.5
+            std += 0.25
+            np.sqrt(std, out=std)
+            std *= np.float32(config.noise / 255.0)
+            std *= rng.standard_normal(views.shape, dtype=np.float32)
+            views += std
+        np.clip(views, 0.0, 1.0, out=views)
+        # one rounding, saturating pass to uint8 (OpenCV), on a 2-D view of the frame
+        lf[t] = cv2.convertScaleAbs(views.reshape(n * n * h, w * 3), alpha=255.0).reshape(n, n, h, w, 3)
     return SynthClip(lf=lf, disparity=disp, config=config)
 
 
+@lru_cache(maxsize=8)
 def _vignetting_gains(n: int, h: int, w: int, strength: float) -> np.ndarray | None:
     """(n, n, h, w) gains: darker towards each view's edge and much darker in corner views."""
     if strength <= 0:

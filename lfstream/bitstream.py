@@ -1,0 +1,292 @@
+"""The ``.lfs`` bitstream: a file header, then one packet per light-field frame.
+
+Version 1 layout (all integers little-endian):
+
+File header::
+
+    magic        4 bytes  b"\\x89LFS"
+    version      u16      1
+    flags        u16      bit 0: packets may carry a depth hint
+    views        u8, u8   U, V
+    size         u16, u16 H, W
+    fps_milli    u32      frame rate x 1000
+    codec        u8       1 = JPEG centre view
+    quality      u8       JPEG quality 1..100
+    reserved     u16      0
+    meta_len     u32      length of the metadata block
+    meta         bytes    zstd-compressed UTF-8 JSON (encoder name, version, options)
+    header_crc   u32      CRC32 of every byte above
+
+Packet (the unit every transport carries)::
+
+    sync         4 bytes  b"LFPK"
+    seq          u32      frame sequence number, from 0
+    timestamp_us u64      presentation time in microseconds
+    image_len    u32      length of the JPEG centre view
+    hint_len     u32      length of the depth hint (0: none)
+    meta_len     u32      length of the per-frame metadata (0: none)
+    image        bytes
+    hint         bytes    zstd-compressed quantised disparity (see :mod:`lfstream.depth`)
+    meta         bytes    zstd-compressed JSON
+    crc          u32      CRC32 of the packet from ``sync`` to the end of ``meta``
+
+A parser checks every length and dimension against :class:`Limits` before it allocates
+anything, checks CRCs, and names the frame in its errors. Reading a damaged file yields
+every complete packet before the damage and then raises :class:`BitstreamError`.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+import zlib
+from dataclasses import dataclass, field
+from typing import BinaryIO, Iterator
+
+import zstandard
+
+from lfstream.errors import BitstreamError, LFValueError
+from lfstream.lightfield import MAX_VIEW_SIDE, MAX_VIEWS_PER_AXIS
+
+MAGIC = b"\x89LFS"
+SYNC = b"LFPK"
+VERSION = 1
+CODEC_JPEG = 1
+FLAG_HINT = 1
+
+_HEADER_FIXED = struct.Struct("<4sHHBBHHIBBHI")  # up to and including meta_len
+_PACKET_FIXED = struct.Struct("<4sIQIII")
+_CRC = struct.Struct("<I")
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Upper bounds a parser enforces before allocating; raise them deliberately for huge LFs."""
+
+    max_views_per_axis: int = MAX_VIEWS_PER_AXIS
+    max_view_side: int = MAX_VIEW_SIDE
+    max_frame_bytes: int = 2 << 30  # decoded U*V*H*W*3
+    max_meta_bytes: int = 1 << 20
+    max_payload_factor: float = 4.0  # image/hint payload <= factor * H * W * 3 + 1 MiB
+
+
+@dataclass(frozen=True)
+class StreamHeader:
+    """Stream-wide parameters."""
+
+    views: tuple[int, int]
+    size: tuple[int, int]
+    fps: float = 30.0
+    quality: int = 50
+    has_hint: bool = False
+    codec: int = CODEC_JPEG
+    meta: dict = field(default_factory=dict)
+
+    def max_payload(self, limits: Limits) -> int:
+        h, w = self.size
+        return int(limits.max_payload_factor * h * w * 3) + (1 << 20)
+
+
+@dataclass(frozen=True)
+class Packet:
+    """One encoded frame."""
+
+    seq: int
+    timestamp_us: int
+    image: bytes
+    hint: bytes = b""
+    meta: bytes = b""
+
+    @property
+    def nbytes(self) -> int:
+        return _PACKET_FIXED.size + len(self.image) + len(self.hint) + len(self.meta) + _CRC.size
+
+
+def _compress_json(obj: dict) -> bytes:
+    if not obj:
+        return b""
+    # fixed level and sorted keys: the same input gives the same bytes
+    return zstandard.ZstdCompressor(level=10).compress(json.dumps(obj, sort_keys=True).encode())
+
+
+def _decompress_json(data: bytes, limit: int, what: str, frame: int | None = None) -> dict:
+    if not data:
+        return {}
+    try:
+        raw = zstandard.ZstdDecompressor().decompress(data, max_output_size=limit)
+        obj = json.loads(raw.decode("utf-8"))
+    except (zstandard.ZstdError, UnicodeDecodeError, ValueError) as exc:
+        raise BitstreamError(f"{what}: corrupt metadata ({exc})", frame) from exc
+    if not isinstance(obj, dict):
+        raise BitstreamError(f"{what}: metadata is not an object", frame)
+    return obj
+
+
+def check_header_values(header: StreamHeader, limits: Limits = Limits()) -> None:
+    """Raises :class:`BitstreamError` if a header describes something the limits refuse."""
+    u, v = header.views
+    h, w = header.size
+    if not (1 <= u <= limits.max_views_per_axis and 1 <= v <= limits.max_views_per_axis):
+        raise BitstreamError(f"header: view grid {u}x{v} outside 1..{limits.max_views_per_axis}")
+    if not (1 <= h <= limits.max_view_side and 1 <= w <= limits.max_view_side):
+        raise BitstreamError(f"header: view size {h}x{w} outside 1..{limits.max_view_side}")
+    if u * v * h * w * 3 > limits.max_frame_bytes:
+        raise BitstreamError(f"header: a decoded frame of {u}x{v}x{h}x{w}x3 bytes exceeds the limit of {limits.max_frame_bytes}")
+    if not (1 <= header.quality <= 100):
+        raise BitstreamError(f"header: JPEG quality {header.quality} outside 1..100")
+    if header.codec != CODEC_JPEG:
+        raise BitstreamError(f"header: unknown codec id {header.codec}")
+    if not (0 < header.fps <= 10000):
+        raise BitstreamError(f"header: frame rate {header.fps} outside (0, 10000]")
+
+
+def pack_header(header: StreamHeader) -> bytes:
+    check_header_values(header)
+    meta = _compress_json(header.meta)
+    fixed = _HEADER_FIXED.pack(
+        MAGIC, VERSION, FLAG_HINT if header.has_hint else 0, header.views[0], header.views[1],
+        header.size[0], header.size[1], int(round(header.fps * 1000)), header.codec, header.quality, 0, len(meta),
+    )
+    body = fixed + meta
+    return body + _CRC.pack(zlib.crc32(body))
+
+
+def pack_packet(packet: Packet) -> bytes:
+    if packet.seq < 0 or packet.seq >= 1 << 32 or packet.timestamp_us < 0:
+        raise LFValueError(f"packet: sequence number or timestamp out of range ({packet.seq}, {packet.timestamp_us})")
+    body = _PACKET_FIXED.pack(SYNC, packet.seq, packet.timestamp_us, len(packet.image), len(packet.hint),
+                              len(packet.meta)) + packet.image + packet.hint + packet.meta
+    return body + _CRC.pack(zlib.crc32(body))
+
+
+def _read_exact(fh: BinaryIO, n: int) -> bytes:
+    data = fh.read(n)
+    return data if data is not None else b""
+
+
+def read_header(fh: BinaryIO, limits: Limits = Limits()) -> StreamHeader:
+    """Reads and validates the file header."""
+    fixed = _read_exact(fh, _HEADER_FIXED.size)
+    if len(fixed) < _HEADER_FIXED.size:
+        raise BitstreamError(f"header: truncated ({len(fixed)} of {_HEADER_FIXED.size} bytes)")
+    magic, version, flags, u, v, h, w, fps_milli, codec, quality, _res, meta_len = _HEADER_FIXED.unpack(fixed)
+    if magic != MAGIC:
+        raise BitstreamError("header: not an lfstream .lfs stream (bad magic)")
+    if version != VERSION:
+        raise BitstreamError(f"header: unsupported version {version} (this reader knows {VERSION})")
+    if meta_len > limits.max_meta_bytes:
+        raise BitstreamError(f"header: metadata length {meta_len} exceeds {limits.max_meta_bytes}")
+    meta = _read_exact(fh, meta_len)
+    crc = _read_exact(fh, _CRC.size)
+    if len(meta) < meta_len or len(crc) < _CRC.size:
+        raise BitstreamError("header: truncated")
+    if _CRC.unpack(crc)[0] != zlib.crc32(fixed + meta):
+        raise BitstreamError("header: CRC mismatch")
+    header = StreamHeader(views=(u, v), size=(h, w), fps=fps_milli / 1000.0, quality=quality,
+                          has_hint=bool(flags & FLAG_HINT), codec=codec,
+                          meta=_decompress_json(meta, limits.max_meta_bytes, "header"))
+    check_header_values(header, limits)
+    return header
+
+
+def read_packet(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits(), expect_seq: int | None = None) -> Packet | None:
+    """Reads one packet; ``None`` at a clean end of stream.
+
+    Raises:
+        BitstreamError: truncated packet, bad sync, lengths over the limits, CRC mismatch.
+    """
+    frame = expect_seq
+    fixed = _read_exact(fh, _PACKET_FIXED.size)
+    if not fixed:
+        return None
+    if len(fixed) < _PACKET_FIXED.size:
+        raise BitstreamError(f"truncated packet header ({len(fixed)} of {_PACKET_FIXED.size} bytes)", frame)
+    sync, seq, ts, image_len, hint_len, meta_len = _PACKET_FIXED.unpack(fixed)
+    if sync != SYNC:
+        raise BitstreamError("bad packet sync marker (corrupt or not a packet boundary)", frame)
+    frame = seq if expect_seq is None else expect_seq
+    cap = header.max_payload(limits)
+    if image_len == 0 or image_len > cap:
+        raise BitstreamError(f"image length {image_len} outside 1..{cap}", frame)
+    if hint_len > cap:
+        raise BitstreamError(f"hint length {hint_len} exceeds {cap}", frame)
+    if meta_len > limits.max_meta_bytes:
+        raise BitstreamError(f"metadata length {meta_len} exceeds {limits.max_meta_bytes}", frame)
+    total = image_len + hint_len + meta_len
+    body = _read_exact(fh, total)
+    crc = _read_exact(fh, _CRC.size)
+    if len(body) < total or len(crc) < _CRC.size:
+        raise BitstreamError(f"truncated packet ({len(body)} of {total} payload bytes)", frame)
+    if _CRC.unpack(crc)[0] != zlib.crc32(fixed + body):
+        raise BitstreamError("CRC mismatch", frame)
+    return Packet(seq=seq, timestamp_us=ts, image=body[:image_len], hint=body[image_len : image_len + hint_len],
+                  meta=body[image_len + hint_len :])
+
+
+def iter_packets(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits()) -> Iterator[Packet]:
+    """Yields packets in order until the end; raises at the first damaged packet (after
+    yielding every complete one before it). A sequence number that does not follow the
+    previous one is damage too: a file is written in order."""
+    expected = 0
+    while True:
+        packet = read_packet(fh, header, limits, expect_seq=expected)
+        if packet is None:
+            return
+        if packet.seq != expected:
+            raise BitstreamError(f"sequence number {packet.seq} where {expected} was expected", expected)
+        yield packet
+        expected += 1
+
+
+def packet_meta(packet: Packet, limits: Limits = Limits()) -> dict:
+    return _decompress_json(packet.meta, limits.max_meta_bytes, "packet", packet.seq)
+
+
+def make_packet_meta(obj: dict) -> bytes:
+    return _compress_json(obj)
+
+
+class StreamWriter:
+    """Writes a header and packets to a binary file-like object."""
+
+    def __init__(self, fh: BinaryIO, header: StreamHeader):
+        self._fh = fh
+        self.header = header
+        self.bytes_written = 0
+        self._write(pack_header(header))
+
+    def _write(self, data: bytes) -> None:
+        self._fh.write(data)
+        self.bytes_written += len(data)
+
+    def write(self, packet: Packet) -> int:
+        data = pack_packet(packet)
+        self._write(data)
+        return len(data)
+
+
+def split_stream(data: bytes, limits: Limits = Limits()) -> tuple[StreamHeader, list[Packet]]:
+    """Parses a whole in-memory stream; raises at damage (see :func:`iter_packets`)."""
+    fh = io.BytesIO(data)
+    header = read_header(fh, limits)
+    return header, list(iter_packets(fh, header, limits))
+
+
+__all__ = [
+    "MAGIC",
+    "VERSION",
+    "Limits",
+    "StreamHeader",
+    "Packet",
+    "pack_header",
+    "pack_packet",
+    "read_header",
+    "read_packet",
+    "iter_packets",
+    "packet_meta",
+    "make_packet_meta",
+    "StreamWriter",
+    "split_stream",
+    "check_header_values",
+]

@@ -1,0 +1,278 @@
+"""The lfstream codec (seed chapter 3): JPEG centre view + depth-based reconstruction.
+
+Encoder, per frame: the centre view, JPEG-compressed (quality 50 by default); the other
+views are discarded. With ``depth_hint=True`` the encoder also estimates the centre
+view's disparity from all views (:mod:`lfstream.depth`) and sends it, quantised and
+zstd-compressed. Packets and the stream header are described in :mod:`lfstream.bitstream`.
+
+Decoder, per frame: JPEG decode, then a disparity map for the centre view — from the hint
+(``depth="hint"``) or zero (``depth="flat"``: every view is the centre view) — and the
+backward warp of the centre view into every view with occlusion handling
+(:mod:`lfstream.warp`). The learned stages of the seed (JPEG-Hance, Depth-Net) plug in here
+once their trained weights ship; until then ``depth="net"`` is refused with an error.
+
+Determinism: the same input and options give the same bytes (OpenCV's JPEG encoder,
+fixed zstd levels, sorted JSON metadata).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import cv2
+import numpy as np
+
+from lfstream.bitstream import (
+    Limits,
+    Packet,
+    StreamHeader,
+    StreamWriter,
+    iter_packets,
+    read_header,
+)
+from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_disparity
+from lfstream.errors import BitstreamError, LFFileError, LFStreamError, LFValueError
+from lfstream.lightfield import centre_view, check_finite, check_lf, to_uint8
+from lfstream.warp import warp_views
+
+DEPTH_MODES = ("auto", "hint", "flat", "net")
+ENCODER_NAME = "lfstream-jpeg-centre"
+
+
+def encode_jpeg(img: np.ndarray, quality: int) -> bytes:
+    """Baseline JPEG of a uint8 RGB image (4:2:0, OpenCV/libjpeg), deterministic."""
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2BGR),
+                           [int(cv2.IMWRITE_JPEG_QUALITY), int(quality)])
+    if not ok:  # pragma: no cover - OpenCV fails only on invalid input, checked by callers
+        raise LFValueError("JPEG encoding failed")
+    return buf.tobytes()
+
+
+def decode_jpeg(data: bytes, size: tuple[int, int], frame: int | None = None) -> np.ndarray:
+    """JPEG bytes to uint8 RGB ``(H, W, 3)``; checks the size the stream header promised."""
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if img is None:
+        raise BitstreamError("centre view is not a decodable JPEG", frame)
+    if img.shape[:2] != tuple(size):
+        raise BitstreamError(f"centre view is {img.shape[0]}x{img.shape[1]}, header says {size[0]}x{size[1]}", frame)
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+@dataclass
+class Encoder:
+    """Encodes LF frames into packets.
+
+    Attributes:
+        quality: JPEG quality of the centre view (1..100).
+        depth_hint: also send the encoder's disparity estimate.
+        hint_options: plane-sweep and coding options of the hint.
+    """
+
+    quality: int = 50
+    depth_hint: bool = False
+    hint_options: HintOptions = field(default_factory=HintOptions)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.quality, (int, np.integer)) or not 1 <= self.quality <= 100:
+            raise LFValueError(f"quality: an integer in 1..100, got {self.quality!r}")
+        self.hint_options.validate()
+
+    def header(self, views: tuple[int, int], size: tuple[int, int], fps: float) -> StreamHeader:
+        from lfstream import __version__
+
+        meta = {"encoder": ENCODER_NAME, "version": __version__, "quality": int(self.quality)}
+        if self.depth_hint:
+            meta["hint"] = {"max_disparity": self.hint_options.max_disparity, "steps": self.hint_options.steps,
+                            "hint_scale": self.hint_options.hint_scale}
+        return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint, meta=meta)
+
+    def encode_frame(self, lf: np.ndarray, seq: int, timestamp_us: int) -> Packet:
+        """One ``(U, V, H, W, 3)`` frame (uint8, or float in [0, 1]) to a packet."""
+        check_lf(lf, allow_video=False)
+        if lf.shape[-1] != 3:
+            raise LFValueError(f"frame {seq}: expected 3 colour channels, got {lf.shape[-1]}")
+        check_finite(lf, f"frame {seq}")
+        frame = to_uint8(np.asarray(lf))
+        image = encode_jpeg(centre_view(frame), self.quality)
+        hint = encode_hint(estimate_disparity(frame, self.hint_options), self.hint_options) if self.depth_hint else b""
+        return Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint)
+
+
+@dataclass
+class DecodedFrame:
+    """A decoded frame with the intermediate results users ask for."""
+
+    seq: int
+    timestamp_us: int
+    lf: np.ndarray  # (U, V, H, W, 3) uint8
+    centre: np.ndarray  # (H, W, 3) uint8, the decoded centre view
+    disparity: np.ndarray  # (H, W) float32 centre-view disparity the warp used
+
+
+@dataclass
+class Decoder:
+    """Decodes packets of one stream.
+
+    Attributes:
+        header: the stream's header.
+        depth: ``"auto"`` (the hint where the stream has one, else flat), ``"hint"``,
+            ``"flat"`` or ``"net"`` (Depth-Net; not available until its weights ship).
+        occlusion: occlusion-aware per-view disparity in the warp.
+    """
+
+    header: StreamHeader
+    depth: str = "auto"
+    occlusion: bool = True
+
+    def __post_init__(self) -> None:
+        if self.depth not in DEPTH_MODES:
+            raise LFValueError(f"depth: one of {', '.join(DEPTH_MODES)}, got {self.depth!r}")
+        if self.depth == "net":
+            raise LFValueError("depth='net': no trained Depth-Net weights ship with this build yet; "
+                               "use depth='hint' (streams encoded with a depth hint) or 'flat'")
+        if self.depth == "hint" and not self.header.has_hint:
+            raise LFValueError("depth='hint': this stream carries no depth hint (encode with depth_hint=True)")
+
+    def decode_packet(self, packet: Packet) -> DecodedFrame:
+        h, w = self.header.size
+        centre = decode_jpeg(packet.image, (h, w), packet.seq)
+        use_hint = self.depth == "hint" or (self.depth == "auto" and packet.hint)
+        if use_hint:
+            if not packet.hint:
+                raise BitstreamError("packet has no depth hint", packet.seq)
+            disparity = decode_hint(packet.hint, (h, w), guide=centre, frame=packet.seq)
+        else:
+            disparity = np.zeros((h, w), np.float32)
+        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion)
+        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity)
+
+
+# ----------------------------------------------------------------------------------------
+# Whole-stream API
+
+
+def _frames_of(lf: np.ndarray) -> np.ndarray:
+    check_lf(lf)
+    return lf if lf.ndim == 6 else lf[None]
+
+
+def encode(
+    lf: np.ndarray,
+    quality: int = 50,
+    depth_hint: bool = False,
+    fps: float = 30.0,
+    hint_options: HintOptions | None = None,
+) -> bytes:
+    """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
+
+    Raises:
+        LFStreamError: bad shape, dtype, non-finite values or parameters.
+    """
+    try:
+        frames = _frames_of(np.asarray(lf) if not hasattr(lf, "numpy") else lf.cpu().numpy())
+    except (TypeError, ValueError, AttributeError) as exc:
+        if isinstance(exc, LFStreamError):
+            raise
+        raise LFValueError(f"lf: not an array ({exc})") from exc
+    enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions())
+    buf = io.BytesIO()
+    writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
+    for t, frame in enumerate(frames):
+        writer.write(enc.encode_frame(frame, t, int(round(t * 1e6 / fps))))
+    return buf.getvalue()
+
+
+def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
+                max_frames: int | None = None) -> Iterator[DecodedFrame]:
+    """Decodes a stream frame by frame; every complete frame before a damaged packet is
+    yielded, then :class:`BitstreamError` names the damaged frame."""
+    header = read_header(fh, limits)
+    dec = Decoder(header, depth=depth, occlusion=occlusion)
+    for k, packet in enumerate(iter_packets(fh, header, limits)):
+        if max_frames is not None and k >= max_frames:
+            return
+        yield dec.decode_packet(packet)
+
+
+def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits()) -> np.ndarray:
+    """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8.
+
+    Raises:
+        LFStreamError: corrupt, truncated or hostile input (the error names the frame; the
+            frames decoded before the damage are in its ``partial`` attribute).
+    """
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise LFValueError(f"data: expected bytes, got {type(data).__name__}")
+    frames: list[np.ndarray] = []
+    try:
+        for f in iter_decode(io.BytesIO(bytes(data)), depth, occlusion, limits):
+            frames.append(f.lf)
+    except BitstreamError as exc:
+        exc.partial = np.stack(frames) if frames else None  # type: ignore[attr-defined]
+        raise
+    if not frames:
+        raise BitstreamError("stream holds no frames")
+    return np.stack(frames)
+
+
+def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | None = None) -> tuple[np.ndarray, float]:
+    """Decodes an ``.lfs`` file; returns ``(lf, fps)``."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            header = read_header(fh)
+            fh.seek(0)
+            frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames)]
+    except OSError as exc:
+        raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    except BitstreamError as exc:
+        raise BitstreamError(f"{path}: {exc}") from exc
+    if not frames:
+        raise BitstreamError(f"{path}: stream holds no frames")
+    return np.stack(frames), header.fps
+
+
+def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tuple[int, int], size: tuple[int, int],
+                encoder: Encoder, fps: float = 30.0) -> dict:
+    """Encodes frames into a file written atomically; returns byte counts and timing."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    stats = {"frames": 0, "bytes": 0, "image_bytes": 0, "hint_bytes": 0, "encode_s": 0.0}
+    try:
+        with open(tmp, "wb") as fh:
+            writer = StreamWriter(fh, encoder.header(views, size, fps))
+            for t, frame in enumerate(frames):
+                t0 = time.perf_counter()
+                packet = encoder.encode_frame(frame, t, int(round(t * 1e6 / fps)))
+                stats["encode_s"] += time.perf_counter() - t0
+                writer.write(packet)
+                stats["frames"] += 1
+                stats["image_bytes"] += len(packet.image)
+                stats["hint_bytes"] += len(packet.hint)
+            stats["bytes"] = writer.bytes_written
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise LFFileError(f"{path}: cannot write ({exc.strerror or exc})") from exc
+    finally:
+        tmp.unlink(missing_ok=True)
+    return stats
+
+
+__all__ = [
+    "DEPTH_MODES",
+    "Encoder",
+    "Decoder",
+    "DecodedFrame",
+    "encode",
+    "decode",
+    "iter_decode",
+    "decode_file",
+    "encode_file",
+    "encode_jpeg",
+    "decode_jpeg",
+]

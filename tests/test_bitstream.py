@@ -1,0 +1,135 @@
+"""The .lfs bitstream: round trips, limits, damage handling and a fuzz run."""
+
+import io
+import struct
+import zlib
+
+import numpy as np
+import pytest
+
+from lfstream.bitstream import (
+    Limits,
+    Packet,
+    StreamHeader,
+    iter_packets,
+    pack_header,
+    pack_packet,
+    read_header,
+    split_stream,
+)
+from lfstream.codec import decode, encode
+from lfstream.errors import BitstreamError, LFStreamError
+from lfstream.synth import synth_clip
+
+
+@pytest.fixture(scope="module")
+def clip():
+    return synth_clip(4, 5, (40, 48), seed=5).lf
+
+
+@pytest.fixture(scope="module")
+def stream(clip):
+    return encode(clip, quality=60)
+
+
+def test_header_and_packets_round_trip():
+    header = StreamHeader(views=(7, 5), size=(375, 540), fps=29.97, quality=42, has_hint=True, meta={"a": 1})
+    data = pack_header(header)
+    packets = [Packet(seq=k, timestamp_us=33366 * k, image=bytes([k + 1]) * (10 + k), hint=b"h" * k) for k in range(3)]
+    data += b"".join(pack_packet(p) for p in packets)
+    back, got = split_stream(data)
+    assert back == header and got == packets
+
+
+def test_encode_is_deterministic_and_decodes(clip, stream):
+    assert encode(clip, quality=60) == stream
+    out = decode(stream)
+    assert out.shape == clip.shape and out.dtype == np.uint8
+    # flat disparity: every view is the decoded centre view
+    assert (out[:, 0, 0] == out[:, 2, 2]).all()
+    # the centre view is exactly the JPEG (q60) of the input's centre view
+    from lfstream.codec import decode_jpeg, encode_jpeg
+
+    for t in range(len(clip)):
+        np.testing.assert_array_equal(out[t, 2, 2], decode_jpeg(encode_jpeg(clip[t, 2, 2], 60), (40, 48)))
+
+
+def test_truncated_stream_yields_complete_frames(stream, clip):
+    header, packets = split_stream(stream)
+    cut = len(stream) - packets[-1].nbytes // 2  # inside the last packet
+    fh = io.BytesIO(stream[:cut])
+    h = read_header(fh)
+    got = []
+    with pytest.raises(BitstreamError) as info:
+        for p in iter_packets(fh, h):
+            got.append(p)
+    assert [p.seq for p in got] == [0, 1, 2] and info.value.frame == 3 and "frame 3" in str(info.value)
+    with pytest.raises(BitstreamError) as info:
+        decode(stream[:cut])
+    assert info.value.partial.shape == (3,) + clip.shape[1:]
+
+
+def test_hostile_lengths_fail_before_allocating(stream):
+    header_len = len(pack_header(split_stream(stream)[0]))
+    data = bytearray(stream)
+    # absurd image length in the first packet, CRC not even reached
+    struct.pack_into("<I", data, header_len + 4 + 4 + 8, 0xFFFFFFF0)
+    with pytest.raises(BitstreamError, match="image length"):
+        decode(bytes(data))
+    # a header promising a 64x64 grid of 16384^2 views is refused by the frame-size limit
+    huge = bytearray(pack_header(StreamHeader(views=(4, 4), size=(64, 64))))
+    struct.pack_into("<BBHH", huge, 8, 64, 64, 16384, 16384)
+    huge[-4:] = struct.pack("<I", zlib.crc32(bytes(huge[:-4])))
+    with pytest.raises(BitstreamError, match="exceeds the limit"):
+        read_header(io.BytesIO(bytes(huge)))
+    with pytest.raises(BitstreamError, match="limit"):
+        read_header(io.BytesIO(pack_header(StreamHeader(views=(8, 8), size=(64, 64)))), Limits(max_frame_bytes=1000))
+
+
+def test_bad_streams_name_the_problem(stream):
+    cases = {
+        "empty": b"",
+        "magic": b"GIF89a" + stream[6:],
+        "header crc": stream[:10] + bytes([stream[10] ^ 1]) + stream[11:],
+        "garbage after": stream + b"\x00garbage",
+        "no frames": stream[: len(pack_header(split_stream(stream)[0]))],
+        "not bytes": "a string",
+    }
+    for what, data in cases.items():
+        with pytest.raises(LFStreamError):
+            decode(data)  # type: ignore[arg-type]
+
+
+def test_reordered_packets_are_detected(stream):
+    header, packets = split_stream(stream)
+    swapped = pack_header(header) + pack_packet(packets[1]) + pack_packet(packets[0])
+    with pytest.raises(BitstreamError, match="sequence"):
+        decode(swapped)
+
+
+def test_fuzz_mutations_never_crash_or_hang(stream):
+    """Bit flips, truncations, absurd lengths and appended garbage: every outcome is a
+    decoded stream of the right shape or an LFStreamError - never another exception."""
+    rng = np.random.default_rng(2024)
+    n_ok = n_err = 0
+    for case in range(300):
+        data = bytearray(stream)
+        kind = case % 4
+        if kind == 0:
+            for _ in range(int(rng.integers(1, 4))):
+                pos = int(rng.integers(0, len(data)))
+                data[pos] ^= 1 << int(rng.integers(0, 8))
+        elif kind == 1:
+            data = data[: int(rng.integers(0, len(data)))]
+        elif kind == 2:
+            pos = int(rng.integers(0, max(1, len(data) - 4)))
+            struct.pack_into("<I", data, pos, int(rng.integers(0, 2**32)))
+        else:
+            data += rng.integers(0, 256, int(rng.integers(1, 200)), dtype=np.uint8).tobytes()
+        try:
+            out = decode(bytes(data))
+            assert out.ndim == 6 and out.dtype == np.uint8
+            n_ok += 1
+        except LFStreamError:
+            n_err += 1
+    assert n_ok + n_err == 300 and n_err > 200  # CRCs catch nearly every mutation

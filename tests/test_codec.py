@@ -1,0 +1,129 @@
+"""Encoder/decoder: reconstruction quality, depth hint accuracy, warp, CLI."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import lfstream
+from lfstream.cli import main
+from lfstream.depth import decode_hint, disparity_errors, encode_hint, estimate_disparity
+from lfstream.errors import LFStreamError, LFValueError
+from lfstream.metrics import PSNR_CAP_DB, capped, mpsnr, mssim, psnr
+from lfstream.synth import fronto_parallel_plane, synth_clip
+from lfstream.warp import warp_views, warp_views_torch
+
+
+def mean_psnr(ref, test):
+    """MPSNR with identical views capped (the centre view of a warp is exact)."""
+    return float(np.mean([capped(p) for p in np.ravel(psnr(ref, test))]))
+
+
+def test_warp_zero_disparity_is_identity(rng):
+    centre = rng.integers(0, 256, (20, 24, 3), dtype=np.uint8)
+    out = warp_views(centre, np.zeros((20, 24), np.float32), (3, 5))
+    assert out.shape == (3, 5, 20, 24, 3) and (out == centre).all()
+    out = warp_views(centre, np.full((20, 24), 1e-9, np.float32), (3, 5), occlusion=False)
+    assert np.abs(out.astype(int) - centre).max() <= 1
+
+
+@pytest.mark.parametrize("occlusion", [True, False])
+def test_warp_reconstructs_a_plane(occlusion):
+    clip = fronto_parallel_plane(7, (64, 80), 0.9, seed=6)
+    lf, d = clip.lf[0], clip.disparity[0, 3, 3]
+    out = warp_views(lf[3, 3], d, (7, 7), occlusion=occlusion)
+    inner = (slice(None), slice(None), slice(8, -8), slice(8, -8))
+    assert mean_psnr(lf[inner], out[inner]) > 30
+    flat = warp_views(lf[3, 3], 0.0, (7, 7))
+    assert mean_psnr(lf[inner], out[inner]) > mean_psnr(lf[inner], flat[inner]) + 5
+
+
+def test_occlusion_handling_helps_at_edges():
+    clip = synth_clip(1, 7, (96, 128), seed=3, layers=4, motion=0, camera_pan=0, disparity_range=(-1.5, 2.0))
+    lf, d = clip.lf[0], clip.disparity[0, 3, 3]
+    with_occ = warp_views(lf[3, 3], d, (7, 7), occlusion=True)
+    without = warp_views(lf[3, 3], d, (7, 7), occlusion=False)
+    assert mean_psnr(lf, with_occ) >= mean_psnr(lf, without) - 0.05
+    assert mssim(lf, with_occ) >= mssim(lf, without) - 1e-3
+
+
+def test_torch_warp_matches_kernel_without_occlusion(rng, device):
+    centre = rng.random((16, 20, 3)).astype(np.float32)
+    d = (rng.random((16, 20)) * 0.6 - 0.3).astype(np.float32)
+    ref = warp_views(centre, d, (3, 3), occlusion=False).astype(np.float32) / 255
+    t = warp_views_torch(torch.from_numpy(centre).permute(2, 0, 1)[None].to(device),
+                         torch.from_numpy(d)[None, None].to(device), (3, 3))
+    got = t[0].permute(0, 1, 3, 4, 2).cpu().numpy()
+    assert np.abs(got - ref).max() <= 1 / 255 + 1e-5
+
+
+def test_depth_hint_accuracy_on_synthetic_truth():
+    clip = synth_clip(1, 7, (96, 128), seed=12, motion=0, camera_pan=0, noise=1.0)
+    lf, gt = clip.lf[0], clip.disparity[0, 3, 3]
+    est = estimate_disparity(lf)
+    err = disparity_errors(est, gt)
+    flat = disparity_errors(np.zeros_like(gt), gt)
+    assert err["mse_x100"] < 0.5 * flat["mse_x100"] and err["badpix_007"] < flat["badpix_007"]
+    data = encode_hint(est)
+    back = decode_hint(data, gt.shape, guide=lf[3, 3])
+    assert disparity_errors(back, gt)["mse_x100"] < 1.5 * err["mse_x100"] + 1.0
+    assert len(data) < gt.size / 8  # well under a bit per pixel
+
+
+def test_hint_improves_reconstruction_over_flat():
+    clip = synth_clip(1, 7, (96, 128), seed=4, motion=0, camera_pan=0)
+    lf = clip.lf[0]
+    flat = lfstream.decode(lfstream.encode(lf, quality=90), depth="flat")[0]
+    hint = lfstream.decode(lfstream.encode(lf, quality=90, depth_hint=True), depth="hint")[0]
+    assert mean_psnr(lf, hint) > mean_psnr(lf, flat) + 1.0
+    assert mssim(lf, hint) > mssim(lf, flat)
+
+
+def test_api_errors():
+    lf = synth_clip(1, 3, (16, 16), seed=0).lf[0]
+    with pytest.raises(LFValueError):
+        lfstream.encode(lf, quality=0)
+    with pytest.raises(LFStreamError):
+        lfstream.encode(np.zeros((3, 3), np.uint8))
+    bad = lf.astype(np.float32) / 255
+    bad[0, 0, 0, 0, 0] = np.inf
+    with pytest.raises(LFValueError, match="NaN or Inf"):
+        lfstream.encode(bad)
+    data = lfstream.encode(lf)
+    with pytest.raises(LFValueError, match="hint"):
+        lfstream.decode(data, depth="hint")
+    with pytest.raises(LFValueError, match="Depth-Net"):
+        lfstream.decode(data, depth="net")
+    with pytest.raises(LFValueError):
+        lfstream.decode(data, depth="magic")
+
+
+def test_cli_encode_decode_and_damaged_stream(tmp_path, capsys):
+    src = tmp_path / "clip.npz"
+    lfstream.write_lf(src, synth_clip(3, 5, (32, 40), seed=1).lf)
+    assert main(["encode", str(src), "-o", str(tmp_path / "a.lfs"), "--quality", "70", "--json"]) == 0
+    enc = json.loads(capsys.readouterr().out)
+    assert {"bytes", "bpp", "encode_s"} <= set(enc) and enc["frames"] == 3
+    assert enc["bpp"] == pytest.approx(8 * enc["bytes"] / (3 * 25 * 32 * 40))
+    assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "a.npy"), "--json",
+                 "--disparity-out", str(tmp_path / "disp")]) == 0
+    dec = json.loads(capsys.readouterr().out)
+    assert dec["frames"] == 3 and "decode_s" in dec
+    out = np.load(tmp_path / "a.npy")
+    assert out.shape == (3, 5, 5, 32, 40, 3) and out.dtype == np.uint8
+    assert sorted(p.name for p in (tmp_path / "disp").iterdir()) == [f"frame_{k:06d}.pfm" for k in range(3)]
+    # the same input and flags give the same bitstream
+    assert main(["encode", str(src), "-o", str(tmp_path / "b.lfs"), "--quality", "70"]) == 0
+    assert (tmp_path / "a.lfs").read_bytes() == (tmp_path / "b.lfs").read_bytes()
+    # a truncated stream: one-line error, and the complete frames are written
+    data = (tmp_path / "a.lfs").read_bytes()
+    (tmp_path / "cut.lfs").write_bytes(data[: len(data) - 100])
+    capsys.readouterr()
+    assert main(["decode", str(tmp_path / "cut.lfs"), "-o", str(tmp_path / "cut.npy")]) == 2
+    err = capsys.readouterr().err
+    assert "frame 2" in err and len(err.strip().splitlines()) == 1
+    assert np.load(tmp_path / "cut.npy").shape[0] == 2
+    # info reads .lfs too
+    assert main(["info", str(tmp_path / "a.lfs"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["frames"] == 3
