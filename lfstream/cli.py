@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Callable, Sequence
@@ -198,6 +199,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
+    # SVT-AV1 prints its configuration banner at info level; the CLI keeps stderr for errors
+    os.environ.setdefault("SVT_LOG", "1")
     try:
         return int(args._handler(args) or 0)
     except LFStreamError as exc:
