@@ -24,9 +24,11 @@ Packet (the unit every transport carries)::
     timestamp_us u64      presentation time in microseconds
     image_len    u32      length of the JPEG centre view
     hint_len     u32      length of the depth hint (0: none)
+    gain_len     u32      length of the per-view gain maps (0: none)
     meta_len     u32      length of the per-frame metadata (0: none)
     image        bytes
     hint         bytes    zstd-compressed quantised disparity (see :mod:`lfstream.depth`)
+    gain         bytes    per-view brightness gains (see :mod:`lfstream.shading`)
     meta         bytes    zstd-compressed JSON
     crc          u32      CRC32 of the packet from ``sync`` to the end of ``meta``
 
@@ -56,7 +58,7 @@ CODEC_JPEG = 1
 FLAG_HINT = 1
 
 _HEADER_FIXED = struct.Struct("<4sHHBBHHIBBHI")  # up to and including meta_len
-_PACKET_FIXED = struct.Struct("<4sIQIII")
+_PACKET_FIXED = struct.Struct("<4sIQIIII")
 _CRC = struct.Struct("<I")
 
 
@@ -96,11 +98,12 @@ class Packet:
     timestamp_us: int
     image: bytes
     hint: bytes = b""
+    gain: bytes = b""
     meta: bytes = b""
 
     @property
     def nbytes(self) -> int:
-        return _PACKET_FIXED.size + len(self.image) + len(self.hint) + len(self.meta) + _CRC.size
+        return _PACKET_FIXED.size + len(self.image) + len(self.hint) + len(self.gain) + len(self.meta) + _CRC.size
 
 
 def _compress_json(obj: dict) -> bytes:
@@ -156,7 +159,7 @@ def pack_packet(packet: Packet) -> bytes:
     if packet.seq < 0 or packet.seq >= 1 << 32 or packet.timestamp_us < 0:
         raise LFValueError(f"packet: sequence number or timestamp out of range ({packet.seq}, {packet.timestamp_us})")
     body = _PACKET_FIXED.pack(SYNC, packet.seq, packet.timestamp_us, len(packet.image), len(packet.hint),
-                              len(packet.meta)) + packet.image + packet.hint + packet.meta
+                              len(packet.gain), len(packet.meta)) + packet.image + packet.hint + packet.gain + packet.meta
     return body + _CRC.pack(zlib.crc32(body))
 
 
@@ -202,26 +205,26 @@ def read_packet(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits(), e
         return None
     if len(fixed) < _PACKET_FIXED.size:
         raise BitstreamError(f"truncated packet header ({len(fixed)} of {_PACKET_FIXED.size} bytes)", frame)
-    sync, seq, ts, image_len, hint_len, meta_len = _PACKET_FIXED.unpack(fixed)
+    sync, seq, ts, image_len, hint_len, gain_len, meta_len = _PACKET_FIXED.unpack(fixed)
     if sync != SYNC:
         raise BitstreamError("bad packet sync marker (corrupt or not a packet boundary)", frame)
     frame = seq if expect_seq is None else expect_seq
     cap = header.max_payload(limits)
     if image_len == 0 or image_len > cap:
         raise BitstreamError(f"image length {image_len} outside 1..{cap}", frame)
-    if hint_len > cap:
-        raise BitstreamError(f"hint length {hint_len} exceeds {cap}", frame)
+    if hint_len > cap or gain_len > cap:
+        raise BitstreamError(f"hint or gain length ({hint_len}, {gain_len}) exceeds {cap}", frame)
     if meta_len > limits.max_meta_bytes:
         raise BitstreamError(f"metadata length {meta_len} exceeds {limits.max_meta_bytes}", frame)
-    total = image_len + hint_len + meta_len
+    total = image_len + hint_len + gain_len + meta_len
     body = _read_exact(fh, total)
     crc = _read_exact(fh, _CRC.size)
     if len(body) < total or len(crc) < _CRC.size:
         raise BitstreamError(f"truncated packet ({len(body)} of {total} payload bytes)", frame)
     if _CRC.unpack(crc)[0] != zlib.crc32(fixed + body):
         raise BitstreamError("CRC mismatch", frame)
-    return Packet(seq=seq, timestamp_us=ts, image=body[:image_len], hint=body[image_len : image_len + hint_len],
-                  meta=body[image_len + hint_len :])
+    a, b, c = image_len, image_len + hint_len, image_len + hint_len + gain_len
+    return Packet(seq=seq, timestamp_us=ts, image=body[:a], hint=body[a:b], gain=body[b:c], meta=body[c:])
 
 
 def iter_packets(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits()) -> Iterator[Packet]:

@@ -38,6 +38,7 @@ from lfstream.bitstream import (
 from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_disparity
 from lfstream.errors import BitstreamError, LFFileError, LFStreamError, LFValueError
 from lfstream.lightfield import centre_view, check_finite, check_lf, to_uint8
+from lfstream.shading import apply_gains, decode_gains, encode_gains, measure_gains, shading_present
 from lfstream.warp import warp_views
 
 DEPTH_MODES = ("auto", "hint", "flat", "net")
@@ -76,16 +77,19 @@ class Encoder:
     quality: int = 50
     depth_hint: bool = False
     hint_options: HintOptions = field(default_factory=HintOptions)
+    gain_grid: int = 4  # per-view brightness gains on a grid x grid mesh; 0 sends none
 
     def __post_init__(self) -> None:
         if not isinstance(self.quality, (int, np.integer)) or not 1 <= self.quality <= 100:
             raise LFValueError(f"quality: an integer in 1..100, got {self.quality!r}")
+        if not isinstance(self.gain_grid, (int, np.integer)) or not 0 <= self.gain_grid <= 64:
+            raise LFValueError(f"gain_grid: an integer in 0..64, got {self.gain_grid!r}")
         self.hint_options.validate()
 
     def header(self, views: tuple[int, int], size: tuple[int, int], fps: float) -> StreamHeader:
         from lfstream import __version__
 
-        meta = {"encoder": ENCODER_NAME, "version": __version__, "quality": int(self.quality)}
+        meta = {"encoder": ENCODER_NAME, "version": __version__, "quality": int(self.quality), "gain_grid": self.gain_grid}
         if self.depth_hint:
             meta["hint"] = {"max_disparity": self.hint_options.max_disparity, "steps": self.hint_options.steps,
                             "hint_scale": self.hint_options.hint_scale}
@@ -100,7 +104,11 @@ class Encoder:
         frame = to_uint8(np.asarray(lf))
         image = encode_jpeg(centre_view(frame), self.quality)
         hint = encode_hint(estimate_disparity(frame, self.hint_options), self.hint_options) if self.depth_hint else b""
-        return Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint)
+        gain = b""
+        if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1:
+            gains = measure_gains(frame, self.gain_grid)
+            gain = encode_gains(gains) if shading_present(gains) else b""
+        return Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
 
 
 @dataclass
@@ -149,6 +157,8 @@ class Decoder:
         else:
             disparity = np.zeros((h, w), np.float32)
         lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion)
+        if packet.gain:
+            lf = apply_gains(lf, decode_gains(packet.gain, self.header.views, packet.seq))
         return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity)
 
 
@@ -167,6 +177,7 @@ def encode(
     depth_hint: bool = False,
     fps: float = 30.0,
     hint_options: HintOptions | None = None,
+    gain_grid: int = 4,
 ) -> bytes:
     """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
 
@@ -179,7 +190,7 @@ def encode(
         if isinstance(exc, LFStreamError):
             raise
         raise LFValueError(f"lf: not an array ({exc})") from exc
-    enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions())
+    enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid)
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
     for t, frame in enumerate(frames):

@@ -73,7 +73,7 @@ def test_hostile_lengths_fail_before_allocating(stream):
     header_len = len(pack_header(split_stream(stream)[0]))
     data = bytearray(stream)
     # absurd image length in the first packet, CRC not even reached
-    struct.pack_into("<I", data, header_len + 4 + 4 + 8, 0xFFFFFFF0)
+    struct.pack_into("<I", data, header_len + 4 + 4 + 8, 0xFFFFFFF0)  # image_len
     with pytest.raises(BitstreamError, match="image length"):
         decode(bytes(data))
     # a header promising a 64x64 grid of 16384^2 views is refused by the frame-size limit

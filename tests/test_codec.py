@@ -127,3 +127,38 @@ def test_cli_encode_decode_and_damaged_stream(tmp_path, capsys):
     # info reads .lfs too
     assert main(["info", str(tmp_path / "a.lfs"), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["frames"] == 3
+
+
+def test_shading_gains_fix_vignetted_views():
+    from lfstream.shading import decode_gains, encode_gains, measure_gains, shading_present
+
+    vig = synth_clip(1, 5, (64, 96), seed=8, vignetting=0.6, motion=0, camera_pan=0).lf[0]
+    clean = synth_clip(1, 5, (64, 96), seed=8, motion=0, camera_pan=0).lf[0]
+    g = measure_gains(vig)
+    assert shading_present(g) and not shading_present(measure_gains(clean))
+    back = decode_gains(encode_gains(g), (5, 5))
+    assert np.abs(np.log2(back) - np.log2(np.clip(g, 0.25, 3.9))).max() <= 1 / 128 + 1e-6
+    with_gain = lfstream.decode(lfstream.encode(vig, quality=90))[0]
+    without = lfstream.decode(lfstream.encode(vig, quality=90, gain_grid=0))[0]
+    assert mean_psnr(vig, with_gain) > mean_psnr(vig, without) + 2
+    # a clean light field sends no gain maps
+    from lfstream.bitstream import split_stream
+
+    assert all(p.gain == b"" for p in split_stream(lfstream.encode(clean))[1])
+    assert all(p.gain != b"" for p in split_stream(lfstream.encode(vig))[1])
+
+
+def test_baselines_round_trip_and_rate_search():
+    from lfstream.baseline import decode_views, encode_at_bpp, encode_views, view_order
+
+    assert view_order(3, 3, "spiral")[0] == (1, 1) and sorted(view_order(3, 3, "spiral")) == view_order(3, 3)
+    assert view_order(2, 3, "serpentine") == [(0, 0), (0, 1), (0, 2), (1, 2), (1, 1), (1, 0)]
+    lf = synth_clip(1, 3, (33, 47), seed=2).lf[0]  # odd sizes are padded and cropped
+    for codec in ("hevc", "av1"):
+        data = encode_views(lf, codec, 20, "spiral")
+        rec = decode_views(data, codec, (3, 3), (33, 47), "spiral")
+        assert rec.shape == lf.shape and mpsnr(lf, rec) > 28
+    res = encode_at_bpp(lf, "hevc", 0.5)
+    assert abs(res.bpp - 0.5) <= 0.1 * 0.5
+    with pytest.raises(LFValueError):
+        view_order(3, 3, "zigzag")
