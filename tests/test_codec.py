@@ -155,9 +155,10 @@ def test_baselines_round_trip_and_rate_search():
     assert view_order(2, 3, "serpentine") == [(0, 0), (0, 1), (0, 2), (1, 2), (1, 1), (1, 0)]
     lf = synth_clip(1, 3, (33, 47), seed=2).lf[0]  # odd sizes are padded and cropped
     for codec in ("hevc", "av1"):
-        data = encode_views(lf, codec, 20, "spiral")
-        rec = decode_views(data, codec, (3, 3), (33, 47), "spiral")
-        assert rec.shape == lf.shape and mpsnr(lf, rec) > 28
+        fine = decode_views(encode_views(lf, codec, 12, "spiral"), codec, (3, 3), (33, 47), "spiral")
+        coarse = decode_views(encode_views(lf, codec, 45, "spiral"), codec, (3, 3), (33, 47), "spiral")
+        # tiny, highly textured views: 4:2:0 chroma alone caps the PSNR in the mid 20s
+        assert fine.shape == lf.shape and mpsnr(lf, fine) > 22 and mpsnr(lf, fine) > mpsnr(lf, coarse) + 3
     res = encode_at_bpp(lf, "hevc", 0.5)
     assert abs(res.bpp - 0.5) <= 0.1 * 0.5
     with pytest.raises(LFValueError):
