@@ -51,7 +51,7 @@ def evaluate(name: str, lf: np.ndarray, runs: int) -> list[dict]:
     for codec in ("hevc", "av1"):
         res = encode_at_bpp(lf, codec, target)
         rec = decode_views(res.data, codec, lf.shape[:2], lf.shape[2:4])
-        t_enc = timeit(lambda: encode_views(lf, codec, res.quality, constant_qp=False), runs=max(1, runs // 2))
+        t_enc = timeit(lambda: encode_views(lf, codec, res.quality, constant_qp=res.constant_qp), runs=max(1, runs // 2))
         t_dec = timeit(lambda: decode_views(res.data, codec, lf.shape[:2], lf.shape[2:4]), runs=runs)
         rows.append({"lf": name, "method": f"{codec} @ lfstream-flat bpp", "quality_param": res.quality,
                      "bytes": res.bytes, "bpp": res.bpp, "encode_s": t_enc["median_s"], "decode_s": t_dec["median_s"],

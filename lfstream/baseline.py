@@ -28,6 +28,7 @@ from lfstream.lightfield import check_lf, to_uint8
 from lfstream.metrics import bpp as bits_per_pixel
 
 ORDERS = ("raster", "serpentine", "spiral")
+MIN_CRF_SIDE = 64
 
 
 def view_order(u: int, v: int, order: str = "raster") -> list[tuple[int, int]]:
@@ -103,6 +104,10 @@ def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order
     u, v, h, w, _ = check_lf(lf, allow_video=False)
     frame_lf = to_uint8(np.asarray(lf))
     ph, pw = h + (h % 2), w + (w % 2)
+    if codec == "hevc" and not constant_qp and min(ph, pw) < MIN_CRF_SIDE:
+        # measured: x265 (PyAV 18.1 wheel) corrupts its heap in CRF mode on 40x48 frames
+        raise LFValueError(f"x265 CRF mode needs views of at least {MIN_CRF_SIDE}x{MIN_CRF_SIDE}; "
+                           "use constant QP for smaller views")
     buf = io.BytesIO()
     with av.open(buf, mode="w", format=spec.container) as container:
         stream = container.add_stream(spec.encoder, rate=Fraction(25, 1),
@@ -150,6 +155,7 @@ class BaselineResult:
     bytes: int
     bpp: float
     data: bytes
+    constant_qp: bool = False  # how ``quality`` was applied (x265 QP instead of CRF)
 
 
 def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "raster", tolerance: float = 0.02,
@@ -163,13 +169,16 @@ def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "r
     if not (np.isfinite(target_bpp) and target_bpp > 0):
         raise LFValueError(f"target bpp must be positive, got {target_bpp!r}")
     lo, hi = spec.quality_range
-    best: BaselineResult | None = None
     shape = np.asarray(lf).shape
+    # x265's fractional CRF where it is safe, else integer constant QP
+    fractional = spec.fractional and min(shape[2], shape[3]) >= MIN_CRF_SIDE
+    constant_qp = codec == "hevc" and not fractional
+    best: BaselineResult | None = None
     for _ in range(max_steps):
-        q = 0.5 * (lo + hi) if spec.fractional else float(int(round(0.5 * (lo + hi))))
-        data = encode_views(lf, codec, q, order, constant_qp=False)
+        q = 0.5 * (lo + hi) if fractional else float(int(round(0.5 * (lo + hi))))
+        data = encode_views(lf, codec, q, order, constant_qp=constant_qp)
         rate = bits_per_pixel(len(data), shape)
-        res = BaselineResult(codec, order, q, len(data), rate, data)
+        res = BaselineResult(codec, order, q, len(data), rate, data, constant_qp)
         if best is None or abs(rate - target_bpp) < abs(best.bpp - target_bpp):
             best = res
         if abs(rate - target_bpp) <= tolerance * target_bpp:
@@ -178,12 +187,12 @@ def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "r
             lo = q
         else:
             hi = q
-        if not spec.fractional and hi - lo <= 1:
+        if not fractional and hi - lo <= 1:
             for q2 in (lo, hi):
-                data = encode_views(lf, codec, q2, order, constant_qp=False)
+                data = encode_views(lf, codec, q2, order, constant_qp=constant_qp)
                 rate = bits_per_pixel(len(data), shape)
                 if abs(rate - target_bpp) < abs(best.bpp - target_bpp):
-                    best = BaselineResult(codec, order, q2, len(data), rate, data)
+                    best = BaselineResult(codec, order, q2, len(data), rate, data, constant_qp)
             break
     assert best is not None
     return best
