@@ -95,18 +95,30 @@ class Encoder:
                             "hint_scale": self.hint_options.hint_scale}
         return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint, meta=meta)
 
-    def encode_frame(self, lf: np.ndarray, seq: int, timestamp_us: int) -> Packet:
-        """One ``(U, V, H, W, 3)`` frame (uint8, or float in [0, 1]) to a packet."""
+    def encode_frame(self, lf: np.ndarray, seq: int, timestamp_us: int, present: np.ndarray | None = None) -> Packet:
+        """One ``(U, V, H, W, 3)`` frame (uint8, or float in [0, 1]) to a packet.
+
+        ``present`` marks the views that exist (a light field read with missing views); the
+        centre view must be among them. The decoder reconstructs every view.
+        """
         check_lf(lf, allow_video=False)
+        if present is not None:
+            present = np.asarray(present, bool)
+            if present.shape != lf.shape[:2]:
+                raise LFValueError(f"frame {seq}: present mask {present.shape} does not match the views {lf.shape[:2]}")
+            if not present[lf.shape[0] // 2, lf.shape[1] // 2]:
+                raise LFValueError(f"frame {seq}: the centre view is missing; it is the view the codec sends")
         if lf.shape[-1] != 3:
             raise LFValueError(f"frame {seq}: expected 3 colour channels, got {lf.shape[-1]}")
         check_finite(lf, f"frame {seq}")
         frame = to_uint8(np.asarray(lf))
         image = encode_jpeg(centre_view(frame), self.quality)
-        hint = encode_hint(estimate_disparity(frame, self.hint_options), self.hint_options) if self.depth_hint else b""
+        hint = b""
+        if self.depth_hint:
+            hint = encode_hint(estimate_disparity(frame, self.hint_options, present), self.hint_options)
         gain = b""
         if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1:
-            gains = measure_gains(frame, self.gain_grid)
+            gains = measure_gains(frame, self.gain_grid, present=present)
             gain = encode_gains(gains) if shading_present(gains) else b""
         return Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
 
@@ -178,8 +190,12 @@ def encode(
     fps: float = 30.0,
     hint_options: HintOptions | None = None,
     gain_grid: int = 4,
+    present: np.ndarray | None = None,
 ) -> bytes:
     """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
+
+    ``present``: the ``(U, V)`` mask of views that exist, for light fields read with missing
+    views (the centre view must exist); the decoder reconstructs all views.
 
     Raises:
         LFStreamError: bad shape, dtype, non-finite values or parameters.
@@ -194,7 +210,7 @@ def encode(
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
     for t, frame in enumerate(frames):
-        writer.write(enc.encode_frame(frame, t, int(round(t * 1e6 / fps))))
+        writer.write(enc.encode_frame(frame, t, int(round(t * 1e6 / fps)), present))
     return buf.getvalue()
 
 
@@ -249,7 +265,7 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
 
 
 def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tuple[int, int], size: tuple[int, int],
-                encoder: Encoder, fps: float = 30.0) -> dict:
+                encoder: Encoder, fps: float = 30.0, present: np.ndarray | None = None) -> dict:
     """Encodes frames into a file written atomically; returns byte counts and timing."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
@@ -259,7 +275,7 @@ def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tu
             writer = StreamWriter(fh, encoder.header(views, size, fps))
             for t, frame in enumerate(frames):
                 t0 = time.perf_counter()
-                packet = encoder.encode_frame(frame, t, int(round(t * 1e6 / fps)))
+                packet = encoder.encode_frame(frame, t, int(round(t * 1e6 / fps)), present)
                 stats["encode_s"] += time.perf_counter() - t0
                 writer.write(packet)
                 stats["frames"] += 1

@@ -294,14 +294,11 @@ def _encode(args: argparse.Namespace) -> int:
 
     if args.output.exists() and not args.overwrite:
         raise LFFileError(f"{args.output}: already exists (pass --overwrite to replace it)")
-    loaded = load_from_args(args)
-    if loaded.present is not None:
-        raise LFValueError(f"{args.input}: the encoder needs every view (the centre view at least); "
-                           "missing views cannot be encoded")
+    loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
     frames = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
     enc = Encoder(quality=args.quality, depth_hint=args.depth_hint)
     stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), enc,
-                        fps=args.fps or loaded.fps or 30.0)
+                        fps=args.fps or loaded.fps or 30.0, present=loaded.present)
     stats.update({"output": str(args.output), "bpp": bpp(stats["bytes"], frames.shape),
                   "hint_bpp": bpp(stats["hint_bytes"], frames.shape), "quality": args.quality})
     if args.json:

@@ -60,8 +60,14 @@ def _sweep_views(u: int, v: int) -> list[tuple[int, int]]:
     return sorted(views)
 
 
-def estimate_disparity(lf: np.ndarray, options: HintOptions = HintOptions()) -> np.ndarray:
+def estimate_disparity(lf: np.ndarray, options: HintOptions = HintOptions(),
+                       present: np.ndarray | None = None) -> np.ndarray:
     """Centre-view disparity of one LF frame by plane sweep with edge-aware aggregation.
+
+    Args:
+        lf: the frame.
+        options: sweep parameters.
+        present: ``(U, V)`` mask of views that exist (e.g. an HCI "star"); others are ignored.
 
     Shape:
         - lf: ``(U, V, H, W, C)``
@@ -69,17 +75,17 @@ def estimate_disparity(lf: np.ndarray, options: HintOptions = HintOptions()) -> 
     """
     options.validate()
     u, v, h, w, _ = check_lf(lf, allow_video=False)
-    if u * v == 1:
+    views = [k for k in _sweep_views(u, v) if present is None or present[k]]
+    if not views:
         return np.zeros((h, w), np.float32)
     s = options.work_scale
     hs, ws = max(1, h // s), max(1, w // s)
     gray = as_float(np.asarray(lf)).mean(-1)
     small = {key: cv2.resize(gray[key], (ws, hs), interpolation=cv2.INTER_AREA) for key in
-             _sweep_views(u, v) + [(u // 2, v // 2)]}
+             views + [(u // 2, v // 2)]}
     centre = small[(u // 2, v // 2)]
     cands = np.linspace(-options.max_disparity, options.max_disparity, options.steps).astype(np.float32)
     cost = np.empty((len(cands), hs, ws), np.float32)
-    views = _sweep_views(u, v)
     guide = centre.astype(np.float32)
     eps = 1e-3
     use_ximgproc = hasattr(cv2, "ximgproc")

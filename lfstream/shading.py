@@ -27,8 +27,9 @@ VERSION = 1
 _STEP = 64.0  # int8 units per octave: gains within 2**(+-127/64) ~ [0.25, 3.96], 1.1 % steps
 
 
-def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3) -> np.ndarray:
-    """Gains ``(U, V, gh, gw, channels)`` of each view against the centre view, cell by cell."""
+def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3, present: np.ndarray | None = None) -> np.ndarray:
+    """Gains ``(U, V, gh, gw, channels)`` of each view against the centre view, cell by cell;
+    views marked absent in ``present`` get gain 1."""
     if grid < 1 or channels not in (1, 3):
         raise LFValueError(f"gain grid >= 1 and channels 1 or 3, got {grid}, {channels}")
     x = np.asarray(lf)
@@ -49,7 +50,10 @@ def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3) -> np.ndarra
         cells = cells.mean(-1, keepdims=True)
     ref = cells[u // 2, v // 2]
     # the offset keeps dark cells (noise, black backgrounds) from producing wild ratios
-    return ((cells + 0.02) / (ref + 0.02)).astype(np.float32)
+    gains = ((cells + 0.02) / (ref + 0.02)).astype(np.float32)
+    if present is not None:
+        gains[~np.asarray(present, bool)] = 1.0
+    return gains
 
 
 def shading_present(gains: np.ndarray, threshold: float = 0.02) -> bool:

@@ -171,3 +171,24 @@ def test_baselines_round_trip_and_rate_search():
         assert res.constant_qp is small and abs(res.bpp - target) <= tol * target
     with pytest.raises(LFValueError):
         view_order(3, 3, "zigzag")
+
+
+def test_encode_star_light_field_with_missing_views():
+    """An HCI "star" (33 of 81 views): the codec needs only the centre view (the hint uses
+    the views present) and the decoder reconstructs all 81; with the hint the present
+    views come back better than with flat disparity."""
+    from tests.conftest import shared
+
+    lf, present = lfstream.read_lf(shared("hci_star", "cotton"), return_mask=True)
+    lf, present = lf[:, :, 128:320, 128:384], present
+    flat = lfstream.decode(lfstream.encode(lf, present=present))[0]
+    hint = lfstream.decode(lfstream.encode(lf, present=present, depth_hint=True))[0]
+    assert hint.shape == (9, 9, 192, 256, 3)
+    idx = [(u, v) for u, v in zip(*np.nonzero(present)) if (u, v) != (4, 4)]
+    p_flat = np.mean([psnr(lf[u, v], flat[u, v]) for u, v in idx])
+    p_hint = np.mean([psnr(lf[u, v], hint[u, v]) for u, v in idx])
+    assert p_hint > p_flat + 2
+    no_centre = present.copy()
+    no_centre[4, 4] = False
+    with pytest.raises(LFValueError, match="centre view is missing"):
+        lfstream.encode(lf, present=no_centre)
