@@ -83,3 +83,17 @@ def test_shape_mismatch_raises(rng):
         psnr(np.zeros((8, 8, 3)), np.zeros((8, 9, 3)))
     with pytest.raises(LFShapeError):
         ssim(np.zeros((8, 8, 3)), np.zeros((8, 8, 3)))
+
+
+def test_bjontegaard_deltas():
+    from lfstream.metrics import bd_psnr, bd_rate
+
+    rates = np.array([0.01, 0.02, 0.04, 0.08])
+    psnrs = np.array([30.0, 33.0, 36.0, 39.0])
+    # B needs exactly 20 % fewer bits for the same PSNR everywhere
+    assert bd_rate(rates, psnrs, 0.8 * rates, psnrs) == pytest.approx(-20.0, abs=1e-6)
+    # B is 1 dB better at every rate
+    assert bd_psnr(rates, psnrs, rates, psnrs + 1) == pytest.approx(1.0, abs=1e-9)
+    assert bd_rate(rates, psnrs, rates, psnrs) == pytest.approx(0.0, abs=1e-9)
+    with pytest.raises(Exception):
+        bd_rate(rates[:3], psnrs[:3], rates, psnrs)
