@@ -230,19 +230,22 @@ def _bd_fit(rates, dists):
     return r, d
 
 
+def _mean_gap(xa, ya, xb, yb) -> float:
+    """Mean of (cubic fit of yb over xb) - (cubic fit of ya over xa) on the overlap of xa and xb."""
+    lo, hi = max(xa.min(), xb.min()), min(xa.max(), xb.max())
+    if hi <= lo:
+        raise LFValueError("Bjontegaard delta: the curves' ranges do not overlap")
+    ia, ib = (np.polyint(np.polyfit(x, y, 3)) for x, y in ((xa, ya), (xb, yb)))
+    return float(((np.polyval(ib, hi) - np.polyval(ib, lo)) - (np.polyval(ia, hi) - np.polyval(ia, lo))) / (hi - lo))
+
+
 def bd_rate(rates_a, dists_a, rates_b, dists_b) -> float:
     """Bjontegaard delta rate: the average rate difference of curve B against curve A at equal
     quality, in percent (negative: B needs fewer bits). Cubic fits of log-rate against
     quality, integrated over the overlapping quality interval (VCEG-M33)."""
     ra, da = _bd_fit(rates_a, dists_a)
     rb, db = _bd_fit(rates_b, dists_b)
-    lo, hi = max(da.min(), db.min()), min(da.max(), db.max())
-    if hi <= lo:
-        raise LFValueError("Bjontegaard delta: the curves' quality ranges do not overlap")
-    pa, pb = np.polyfit(da, ra, 3), np.polyfit(db, rb, 3)
-    ia = np.polyval(np.polyint(pa), hi) - np.polyval(np.polyint(pa), lo)
-    ib = np.polyval(np.polyint(pb), hi) - np.polyval(np.polyint(pb), lo)
-    return float((10 ** ((ib - ia) / (hi - lo)) - 1) * 100)
+    return float((10 ** _mean_gap(da, ra, db, rb) - 1) * 100)
 
 
 def bd_psnr(rates_a, dists_a, rates_b, dists_b) -> float:
@@ -250,13 +253,7 @@ def bd_psnr(rates_a, dists_a, rates_b, dists_b) -> float:
     (dB for PSNR), over the overlapping log-rate interval."""
     ra, da = _bd_fit(rates_a, dists_a)
     rb, db = _bd_fit(rates_b, dists_b)
-    lo, hi = max(ra.min(), rb.min()), min(ra.max(), rb.max())
-    if hi <= lo:
-        raise LFValueError("Bjontegaard delta: the curves' rate ranges do not overlap")
-    pa, pb = np.polyfit(ra, da, 3), np.polyfit(rb, db, 3)
-    ia = np.polyval(np.polyint(pa), hi) - np.polyval(np.polyint(pa), lo)
-    ib = np.polyval(np.polyint(pb), hi) - np.polyval(np.polyint(pb), lo)
-    return float((ib - ia) / (hi - lo))
+    return _mean_gap(ra, da, rb, db)
 
 
 __all__ = [
