@@ -6,10 +6,12 @@ view's disparity from all views (:mod:`lfstream.depth`) and sends it, quantised 
 zstd-compressed. Packets and the stream header are described in :mod:`lfstream.bitstream`.
 
 Decoder, per frame: JPEG decode, then a disparity map for the centre view — from the hint
-(``depth="hint"``) or zero (``depth="flat"``: every view is the centre view) — and the
-backward warp of the centre view into every view with occlusion handling
-(:mod:`lfstream.warp`). The learned stages of the seed (JPEG-Hance, Depth-Net) plug in here
-once their trained weights ship; until then ``depth="net"`` is refused with an error.
+(``depth="hint"``), zero (``depth="flat"``: every view is the centre view) or Depth-Net's
+per-view maps (``depth="net"``) — and the backward warp of the centre view into every
+view with occlusion handling (:mod:`lfstream.warp`). JPEG-Hance (:mod:`lfstream.restore`)
+restores the decoded centre view first where it helps (``hance="auto"``: JPEG quality up
+to :data:`HANCE_MAX_QUALITY`). The networks are pluggable stages with the shipped ``fast``
+weights; ``hance="off"`` and ``depth="flat"``/``"hint"`` are the non-learned fallbacks.
 
 Determinism: the same input and options give the same bytes (OpenCV's JPEG encoder,
 fixed zstd levels, sorted JSON metadata).
@@ -39,7 +41,7 @@ from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_dispa
 from lfstream.errors import BitstreamError, LFFileError, LFStreamError, LFValueError
 from lfstream.lightfield import centre_view, check_finite, check_lf, to_uint8
 from lfstream.shading import apply_gains, decode_gains, encode_gains, measure_gains, shading_present
-from lfstream.warp import warp_views
+from lfstream.warp import warp_views, warp_views_per_view
 
 DEPTH_MODES = ("auto", "hint", "flat", "net")
 ENCODER_NAME = "lfstream-jpeg-centre"
@@ -134,44 +136,108 @@ class DecodedFrame:
     disparity: np.ndarray  # (H, W) float32 centre-view disparity the warp used
 
 
+HANCE_MODES = ("auto", "on", "off")
+# "auto" runs JPEG-Hance only up to this JPEG quality per preset: above it the measured mean
+# PSNR gain on the real samples' centre views (seahorse, HCI dino/cotton) is below 0.1 dB or
+# negative (bench/networks.py: fast +0.32/+0.18/-0.14 dB at q10/30/50; paper +0.52 at q70,
+# -1.35 at q90).
+HANCE_MAX_QUALITY = {"fast": 30, "paper": 70}
+
+
+def check_device(device: str) -> str:
+    """``"cpu"`` or ``"cuda"`` (when torch sees a GPU); a clear error otherwise."""
+    import torch
+
+    if device not in ("cpu", "cuda") and not str(device).startswith("cuda:"):
+        raise LFValueError(f"device: 'cpu' or 'cuda', got {device!r}")
+    if str(device).startswith("cuda") and not torch.cuda.is_available():
+        raise LFValueError(f"device={device!r}: torch sees no CUDA GPU on this machine; use --device cpu")
+    return str(device)
+
+
 @dataclass
 class Decoder:
-    """Decodes packets of one stream.
+    """Decodes packets of one stream: JPEG decode -> JPEG-Hance -> disparity -> warp.
 
     Attributes:
         header: the stream's header.
         depth: ``"auto"`` (the hint where the stream has one, else flat), ``"hint"``,
-            ``"flat"`` or ``"net"`` (Depth-Net; not available until its weights ship).
-        occlusion: occlusion-aware per-view disparity in the warp.
+            ``"flat"`` or ``"net"`` (Depth-Net; its fast preset refines the depth hint).
+        occlusion: occlusion-aware per-view disparity in the warp (hint mode).
+        hance: ``"auto"`` (JPEG-Hance where it helps: stream quality <= HANCE_MAX_QUALITY[preset]),
+            ``"on"`` or ``"off"``.
+        device: where the networks run (``"cpu"`` or ``"cuda"``).
+        preset: network preset whose shipped weights are used.
     """
 
     header: StreamHeader
     depth: str = "auto"
     occlusion: bool = True
+    hance: str = "auto"
+    device: str = "cpu"
+    preset: str = "fast"
 
     def __post_init__(self) -> None:
         if self.depth not in DEPTH_MODES:
             raise LFValueError(f"depth: one of {', '.join(DEPTH_MODES)}, got {self.depth!r}")
-        if self.depth == "net":
-            raise LFValueError("depth='net': no trained Depth-Net weights ship with this build yet; "
-                               "use depth='hint' (streams encoded with a depth hint) or 'flat'")
+        if self.hance not in HANCE_MODES:
+            raise LFValueError(f"hance: one of {', '.join(HANCE_MODES)}, got {self.hance!r}")
+        self.device = check_device(self.device)
         if self.depth == "hint" and not self.header.has_hint:
             raise LFValueError("depth='hint': this stream carries no depth hint (encode with depth_hint=True)")
+        from lfstream.weights import load_model
+
+        use_hance = self.hance == "on" or (self.hance == "auto"
+                                           and self.header.quality <= HANCE_MAX_QUALITY.get(self.preset, 0))
+        self._hance = load_model("jpeg_hance", self.preset, self.device) if use_hance else None
+        self._depth_net = None
+        if self.depth == "net":
+            self._depth_net = load_model("depth_net", self.preset, self.device)
+            if self._depth_net.config.hint and not self.header.has_hint:
+                raise LFValueError("depth='net': the shipped Depth-Net refines the encoder's depth hint and this "
+                                   "stream carries none (encode with --depth-hint, or decode with --depth flat)")
+
+    @property
+    def uses_hance(self) -> bool:
+        return self._hance is not None
 
     def decode_packet(self, packet: Packet) -> DecodedFrame:
+        return self.decode_batch([packet])[0]
+
+    def decode_batch(self, packets: list[Packet]) -> list[DecodedFrame]:
+        """Decodes several packets; the networks run once over the batch."""
+        if not packets:
+            return []
         h, w = self.header.size
-        centre = decode_jpeg(packet.image, (h, w), packet.seq)
-        use_hint = self.depth == "hint" or (self.depth == "auto" and packet.hint)
-        if use_hint:
-            if not packet.hint:
-                raise BitstreamError("packet has no depth hint", packet.seq)
-            disparity = decode_hint(packet.hint, (h, w), guide=centre, frame=packet.seq)
-        else:
-            disparity = np.zeros((h, w), np.float32)
-        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion)
-        if packet.gain:
-            lf = apply_gains(lf, decode_gains(packet.gain, self.header.views, packet.seq))
-        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity)
+        centres = np.stack([decode_jpeg(p.image, (h, w), p.seq) for p in packets])
+        if self._hance is not None:
+            from lfstream.restore import restore_images
+
+            centres = restore_images(centres, self._hance, self.device)
+        hints: list[np.ndarray | None] = []
+        for p, centre in zip(packets, centres):
+            use_hint = self.depth in ("hint", "net") or (self.depth == "auto" and p.hint)
+            if use_hint and not p.hint:
+                raise BitstreamError("packet has no depth hint", p.seq)
+            hints.append(decode_hint(p.hint, (h, w), guide=centre, frame=p.seq) if use_hint else None)
+        view_maps = None
+        if self._depth_net is not None:
+            from lfstream.depth_net import predict_view_disparities
+
+            stacked = np.stack(hints) if self._depth_net.config.hint else None
+            view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device)
+        out = []
+        for k, (p, centre) in enumerate(zip(packets, centres)):
+            if view_maps is not None:
+                disparity = view_maps[k, self.header.views[0] // 2, self.header.views[1] // 2]
+                lf = warp_views_per_view(centre, view_maps[k])
+            else:
+                disparity = hints[k] if hints[k] is not None else np.zeros((h, w), np.float32)
+                lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion)
+            if p.gain:
+                lf = apply_gains(lf, decode_gains(p.gain, self.header.views, p.seq))
+            out.append(DecodedFrame(p.seq, p.timestamp_us, lf, centre, disparity))
+        return out
 
 
 # ----------------------------------------------------------------------------------------
@@ -215,18 +281,35 @@ def encode(
 
 
 def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
-                max_frames: int | None = None) -> Iterator[DecodedFrame]:
-    """Decodes a stream frame by frame; every complete frame before a damaged packet is
-    yielded, then :class:`BitstreamError` names the damaged frame."""
+                max_frames: int | None = None, hance: str = "auto", device: str = "cpu",
+                batch: int = 1) -> Iterator[DecodedFrame]:
+    """Decodes a stream frame by frame (networks batched over ``batch`` frames); every
+    complete frame before a damaged packet is yielded, then :class:`BitstreamError` names
+    the damaged frame."""
+    if not isinstance(batch, int) or not 1 <= batch <= 256:
+        raise LFValueError(f"batch: an integer in 1..256, got {batch!r}")
     header = read_header(fh, limits)
-    dec = Decoder(header, depth=depth, occlusion=occlusion)
-    for k, packet in enumerate(iter_packets(fh, header, limits)):
-        if max_frames is not None and k >= max_frames:
-            return
-        yield dec.decode_packet(packet)
+    dec = Decoder(header, depth=depth, occlusion=occlusion, hance=hance, device=device)
+    pending: list[Packet] = []
+    try:
+        for k, packet in enumerate(iter_packets(fh, header, limits)):
+            if max_frames is not None and k >= max_frames:
+                break
+            pending.append(packet)
+            if len(pending) >= batch:
+                yield from dec.decode_batch(pending)
+                pending = []
+    except BitstreamError:
+        # frames read before a damaged packet are still delivered, then the error
+        if pending:
+            yield from dec.decode_batch(pending)
+        raise
+    if pending:
+        yield from dec.decode_batch(pending)
 
 
-def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits()) -> np.ndarray:
+def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
+           hance: str = "auto", device: str = "cpu") -> np.ndarray:
     """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8.
 
     Raises:
@@ -237,7 +320,7 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
         raise LFValueError(f"data: expected bytes, got {type(data).__name__}")
     frames: list[np.ndarray] = []
     try:
-        for f in iter_decode(io.BytesIO(bytes(data)), depth, occlusion, limits):
+        for f in iter_decode(io.BytesIO(bytes(data)), depth, occlusion, limits, hance=hance, device=device):
             frames.append(f.lf)
     except BitstreamError as exc:
         exc.partial = np.stack(frames) if frames else None  # type: ignore[attr-defined]
@@ -247,14 +330,15 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
     return np.stack(frames)
 
 
-def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | None = None) -> tuple[np.ndarray, float]:
+def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | None = None,
+                hance: str = "auto", device: str = "cpu") -> tuple[np.ndarray, float]:
     """Decodes an ``.lfs`` file; returns ``(lf, fps)``."""
     path = Path(path)
     try:
         with open(path, "rb") as fh:
             header = read_header(fh)
             fh.seek(0)
-            frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames)]
+            frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device)]
     except OSError as exc:
         raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
     except BitstreamError as exc:
@@ -292,6 +376,9 @@ def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tu
 
 __all__ = [
     "DEPTH_MODES",
+    "HANCE_MODES",
+    "HANCE_MAX_QUALITY",
+    "check_device",
     "Encoder",
     "Decoder",
     "DecodedFrame",

@@ -24,7 +24,8 @@ def _refocus_args(p: argparse.ArgumentParser) -> Handler:
     p.add_argument("--slopes", type=parse_float_list, help="instead of alphas: shifts in pixels per view step")
     p.add_argument("--slope-range", nargs=3, type=float, metavar=("LO", "HI", "N"),
                    help="N slopes evenly spaced from LO to HI (a focus range in disparity units)")
-    p.add_argument("--method", choices=("sas", "fourier"), default="sas")
+    p.add_argument("--method", choices=("sas", "fourier", "refnet"), default="sas")
+    p.add_argument("--device", default="cpu", help="where RefNet runs (method refnet)")
     p.add_argument("--aperture", type=float, help="synthetic aperture radius in view steps (default: all views)")
     p.add_argument("--aperture-shape", choices=("circle", "square", "gaussian"), default="circle")
     p.add_argument("--fps", type=float, default=8.0, help="frame rate of the focal sweep")
@@ -52,8 +53,9 @@ def _refocus(args: argparse.Namespace) -> int:
         raise LFFileError(f"{out}: already exists and is not an empty folder")
     loaded = load_from_args(args)
     t0 = time.perf_counter()
+    extra = {"device": args.device} if args.method == "refnet" else {}
     stack = focal_stack(loaded.lf, slopes=slopes, method=args.method, aperture=args.aperture,
-                        aperture_shape=args.aperture_shape, present=loaded.present)
+                        aperture_shape=args.aperture_shape, present=loaded.present, **extra)
     render_s = time.perf_counter() - t0
     if stack.dtype != np.uint8:
         stack = np.clip(stack * 255.0 + 0.5, 0, 255).astype(np.uint8)
@@ -317,6 +319,11 @@ def _decode_args(p: argparse.ArgumentParser) -> Handler:
     p.add_argument("--depth", choices=("auto", "hint", "flat", "net"), default="auto",
                    help="disparity source: the stream's hint, flat (zero), or Depth-Net (default: hint if present)")
     p.add_argument("--no-occlusion", action="store_true", help="warp without occlusion-aware per-view disparity")
+    p.add_argument("--no-hance", action="store_true", help="skip JPEG-Hance (default: run it where it helps)")
+    p.add_argument("--hance", choices=("auto", "on", "off"), default="auto",
+                   help="JPEG-Hance: auto (by the stream's JPEG quality, measured threshold), on or off")
+    p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
+    p.add_argument("--batch", type=int, default=1, help="frames per network batch")
     p.add_argument("--disparity-out", type=Path, help="folder for the centre-view disparity of each frame (PFM)")
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--json", action="store_true")
@@ -336,7 +343,9 @@ def _decode(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         with open(args.input, "rb") as fh:
-            for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion):
+            hance = "off" if args.no_hance else args.hance
+            for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
+                                 device=args.device, batch=args.batch):
                 frames.append(f.lf)
                 if args.disparity_out is not None:
                     write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
@@ -418,4 +427,26 @@ def _baseline(args: argparse.Namespace) -> int:
         print(f"{args.codec} ({args.order}) at QP/CRF {', '.join(f'{q:g}' for q in params)}: {total} bytes, "
               f"{result['bpp']:.5f} bpp, MPSNR {np.mean(result['mpsnr']):.2f} dB, MSSIM {np.mean(result['mssim']):.4f}, "
               f"encode {enc_s:.2f} s, decode {dec_s:.3f} s")
+    return 0
+
+
+# ----------------------------------------------------------------------------------------
+# models
+
+
+@command("models", "list the networks, their presets, parameter counts and shipped weights")
+def _models_args(p: argparse.ArgumentParser) -> Handler:
+    p.add_argument("--json", action="store_true")
+    return _models
+
+
+def _models(args: argparse.Namespace) -> int:
+    from lfstream.weights import list_models
+
+    models = list_models()
+    if args.json:
+        emit_json({"models": models})
+    else:
+        for m in models:
+            print(f"{m['name']:11s} {m['preset']:6s} {m['params']:>11,d} params  weights: {m['weights'] or '-'}")
     return 0

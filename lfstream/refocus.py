@@ -32,7 +32,7 @@ from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import aperture_weights, check_finite, check_lf
 from lfstream.optics import SEED_ALPHAS, alpha_from_slope, slopes_from_alphas
 
-METHODS = ("sas", "fourier")
+METHODS = ("sas", "fourier", "refnet")
 
 
 # ----------------------------------------------------------------------------------------
@@ -326,7 +326,9 @@ def focal_stack(
     Args:
         lf: ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``; uint8, float16, float32 or float64.
         alphas: refocus parameters (default the seed's sixteen, 0.125 ... 2.0).
-        method: ``"sas"`` (exact shift-and-sum) or ``"fourier"`` (Fourier slice).
+        method: ``"sas"`` (exact shift-and-sum), ``"fourier"`` (Fourier slice) or ``"refnet"``
+            (the shipped RefNet: the seed's sixteen alphas only, the grid it was trained for;
+            option ``device``).
         slopes: instead of alphas, shifts in pixels per view step (= disparity in focus).
         aperture: synthetic aperture radius in view steps (``None``: all views); see
             :func:`lfstream.lightfield.aperture_weights` for ``aperture_shape``.
@@ -351,9 +353,42 @@ def focal_stack(
         out = shift_and_sum(lf, s, weights, present)
     elif method == "fourier":
         out = fourier_slice(lf, s, weights, present, **method_options)
+    elif method == "refnet":
+        if weights is not None or present is not None:
+            raise LFValueError("method='refnet' renders the full aperture of a complete light field; "
+                               "aperture, weights and missing views need 'sas' or 'fourier'")
+        out = refnet_stack(lf, s, **method_options)
     else:
         raise LFValueError(f"method: one of {', '.join(METHODS)}, got {method!r}")
     return _to_input_range(out, lf)
+
+
+def refnet_stack(lf, slopes: np.ndarray, device: str | None = None, preset: str = "fast"):
+    """Focal stack by the shipped RefNet (see :mod:`lfstream.refnet`), float in ``[0, 1]``.
+
+    Shape:
+        - lf: ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``; output ``(16, H, W, 3)`` or ``(T, 16, H, W, 3)``
+    """
+    from lfstream.weights import load_model
+
+    seed = slopes_from_alphas(SEED_ALPHAS)
+    if np.shape(slopes) != np.shape(seed) or not np.allclose(slopes, seed, atol=1e-6):
+        raise LFValueError("method='refnet' renders the seed's sixteen alphas (0.125 ... 2.0) only")
+    is_torch = isinstance(lf, torch.Tensor)
+    dev = device or (str(lf.device) if is_torch else "cpu")
+    model = load_model("refnet", preset, dev)
+    if lf.shape[-1] != 3 or tuple(lf.shape[-5:-3]) != tuple(model.config.views):
+        raise LFValueError(f"method='refnet': the shipped RefNet takes {model.config.views[0]}x{model.config.views[1]} "
+                           f"RGB views, got {tuple(lf.shape[-5:-3])} with {lf.shape[-1]} channels (train one with "
+                           "tools/train.py, or use 'sas')")
+    x = lf if is_torch else torch.from_numpy(np.ascontiguousarray(lf))
+    x = x.to(dev)
+    x = x.float().div_(255.0) if x.dtype == torch.uint8 else x.float()
+    video = x if x.ndim == 6 else x[None]
+    with torch.inference_mode():
+        out = model(video.permute(0, 1, 2, 5, 3, 4)).permute(0, 1, 3, 4, 2)
+    out = out if x.ndim == 6 else out[0]
+    return out if is_torch else out.cpu().numpy()
 
 
 def _to_input_range(out, like):
@@ -425,6 +460,7 @@ __all__ = [
     "shift_and_sum",
     "fourier_slice",
     "focal_stack",
+    "refnet_stack",
     "all_in_focus",
     "FocalStack",
     "alpha_from_slope",

@@ -88,4 +88,41 @@ def warp_views_torch(centre: torch.Tensor, disparity: torch.Tensor, views: tuple
     return torch.stack(out, 1).reshape(b, u_n, v_n, c, h, w)
 
 
-__all__ = ["warp_views", "warp_views_torch"]
+def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray) -> np.ndarray:
+    """``L(x, u) = C(x + (u - u0) d(x, u))`` with one disparity map per view (Depth-Net's
+    output, seed Fig. 3.2): one OpenCV bilinear remap per view, border clamped.
+
+    Args:
+        centre: ``(H, W, C)`` uint8 or float in ``[0, 1]``.
+        disparities: ``(U, V, H, W)`` px per view step.
+
+    Shape:
+        - output: ``(U, V, H, W, C)`` uint8
+    """
+    import cv2
+
+    if centre.ndim != 3 or disparities.ndim != 4 or disparities.shape[2:] != centre.shape[:2]:
+        raise LFShapeError(f"centre (H, W, C) and disparities (U, V, H, W) must agree; got {tuple(centre.shape)} "
+                           f"and {tuple(disparities.shape)}")
+    check_finite(disparities, "disparities")
+    u_n, v_n, h, w = disparities.shape
+    c = centre.shape[2]
+    src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    out = np.empty((u_n, v_n, h, w, c), np.uint8)
+    mx = np.empty((h, w), np.float32)
+    my = np.empty((h, w), np.float32)
+    for a in range(u_n):
+        for b in range(v_n):
+            d = disparities[a, b].astype(np.float32, copy=False)
+            np.multiply(d, np.float32(b - v_n // 2), out=mx)
+            mx += xs
+            np.multiply(d, np.float32(a - u_n // 2), out=my)
+            my += ys
+            dst = out[a, b] if c > 1 else out[a, b, :, :, 0]
+            cv2.remap(src if c > 1 else src[:, :, 0], mx, my, cv2.INTER_LINEAR, dst=dst,
+                      borderMode=cv2.BORDER_REPLICATE)
+    return out
+
+
+__all__ = ["warp_views", "warp_views_torch", "warp_views_per_view"]

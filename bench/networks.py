@@ -1,0 +1,163 @@
+"""Do the networks earn their cost? JPEG-Hance, Depth-Net and RefNet against their
+non-learned alternatives, with CPU time (and GPU time with --device cuda).
+
+- JPEG-Hance: PSNR/SSIM gain over plain JPEG on held-out synthetic centre views and the
+  real samples' centre views, per preset, and the gain against JPEG quality (the threshold
+  the decoder's ``hance="auto"`` uses).
+- Depth-Net: reconstructed-LF MPSNR/MSSIM with the network vs flat disparity vs the depth
+  hint (vs ground truth on synthetic scenes), on synthetic and real light fields.
+- RefNet: PSNR/SSIM against shift-and-sum on held-out synthetic LFs and the time per
+  7x7x375x540 LF of RefNet, SaS and Fourier slice refocusing.
+
+    python bench/networks.py [--json [FILE]] [--runs N] [--quick] [--device cuda]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from _harness import ROOT, emit, parser, timeit
+
+import lfstream
+from lfstream.codec import decode_jpeg, encode_jpeg
+from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_disparity
+from lfstream.depth_net import predict_view_disparities
+from lfstream.metrics import capped, mpsnr, mssim, psnr, ssim
+from lfstream.refocus import focal_stack
+from lfstream.restore import restore_images
+from lfstream.synth import synth_clip
+from lfstream.warp import warp_views, warp_views_per_view
+from lfstream.weights import load_model, manifest_entry
+
+SHARED = ROOT.parent / "shared" / "data"
+
+
+def jpeg(img: np.ndarray, q: int) -> np.ndarray:
+    return decode_jpeg(encode_jpeg(img, q), img.shape[:2])
+
+
+def real_lfs() -> list[tuple[str, np.ndarray, np.ndarray | None]]:
+    out = []
+    if (SHARED / "seahorse5x5").exists():
+        out.append(("seahorse5x5", lfstream.read_lf(SHARED / "seahorse5x5" / "camImagesFlat"), None))
+    for scene in ("dino", "cotton"):
+        if (SHARED / "hci_star" / scene).exists():
+            lf, mask = lfstream.read_lf(SHARED / "hci_star" / scene, return_mask=True)
+            out.append((f"hci {scene}", lf, mask))
+    return out
+
+
+def synthetic_lfs(count: int, size: tuple[int, int], seed: int = 5000) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    out = []
+    for k in range(count):
+        clip = synth_clip(1, 7, size, seed=seed + k, noise=2.0 if k % 2 else 0.0, motion=0, camera_pan=0)
+        out.append((f"synthetic {seed + k}", clip.lf[0], clip.disparity[0]))
+    return out
+
+
+def bench_hance(device: str, runs: int, quick: bool) -> list[dict]:
+    rows = []
+    views = [(n, lf[lf.shape[0] // 2, lf.shape[1] // 2]) for n, lf, _ in synthetic_lfs(2 if quick else 6, (128, 128))]
+    views += [(n, lf[lf.shape[0] // 2, lf.shape[1] // 2]) for n, lf, _ in real_lfs()]
+    for preset in ("fast", "paper"):
+        if manifest_entry("jpeg_hance", preset) is None:
+            continue
+        model = load_model("jpeg_hance", preset, device)
+        for q in (10, 30, 50, 70, 90) if not quick else (50,):
+            for name, view in views:
+                dec = jpeg(view, q)
+                rest = restore_images(dec[None], model, device)[0]
+                rows.append({"model": "jpeg_hance", "preset": preset, "lf": name, "quality": q,
+                             "jpeg_psnr": capped(psnr(view, dec)), "hance_psnr": capped(psnr(view, rest)),
+                             "jpeg_ssim": float(ssim(view, dec)), "hance_ssim": float(ssim(view, rest))})
+        img = np.ascontiguousarray(np.broadcast_to(views[-1][1][:1, :1], (375, 540, 3)))
+        img = (np.random.default_rng(0).random((375, 540, 3)) * 255).astype(np.uint8) if img.std() == 0 else img
+        t = timeit(lambda: restore_images(img[None], model, device), runs=runs)
+        rows.append({"model": "jpeg_hance", "preset": preset, "timing": "375x540", "device": device, **t})
+    for r in rows:
+        if "quality" in r and r["quality"] == 50:
+            print(f"JPEG-Hance {r['preset']:5s} {r['lf']:18s} q50: {r['jpeg_psnr']:6.2f} -> {r['hance_psnr']:6.2f} dB, "
+                  f"SSIM {r['jpeg_ssim']:.4f} -> {r['hance_ssim']:.4f}")
+        elif "timing" in r:
+            print(f"JPEG-Hance {r['preset']:5s} 375x540 on {device}: {r['median_s'] * 1e3:.1f} ms")
+    return rows
+
+
+def bench_depth(device: str, runs: int, quick: bool) -> list[dict]:
+    rows = []
+    if manifest_entry("depth_net", "fast") is None:
+        return rows
+    net = load_model("depth_net", "fast", device)
+    opts = HintOptions()
+    cases = [(n, lf, None, gt) for n, lf, gt in synthetic_lfs(2 if quick else 4, (128, 160) if quick else (256, 256))]
+    cases += [(n, lf, m, None) for n, lf, m in real_lfs()]
+    for name, lf, mask, gt in cases:
+        u, v = lf.shape[:2]
+        centre = jpeg(lf[u // 2, v // 2], 50)
+        hint = decode_hint(encode_hint(estimate_disparity(lf, opts, mask), opts), centre.shape[:2], guide=centre)
+        maps = predict_view_disparities(centre[None], net, (u, v), hint[None], device)[0]
+        recs = {"flat": warp_views(centre, 0.0, (u, v)), "hint": warp_views(centre, hint, (u, v)),
+                "net": warp_views_per_view(centre, maps)}
+        if gt is not None:
+            recs["ground truth"] = warp_views(centre, gt[u // 2, v // 2], (u, v))
+        sel = (slice(None),) if mask is None else (mask,)
+        for method, rec in recs.items():
+            ref, out = (lf, rec) if mask is None else (lf[mask][:, None], rec[mask][:, None])
+            rows.append({"model": "depth_net", "lf": name, "disparity": method,
+                         "mpsnr": capped(mpsnr(ref, out)), "mssim": float(mssim(ref, out))})
+        del sel
+        print(f"Depth-Net {name:18s} " + "  ".join(f"{r['disparity']}: {r['mpsnr']:.2f}/{r['mssim']:.4f}"
+                                                    for r in rows if r["lf"] == name))
+    c = np.zeros((1, 375, 540, 3), np.uint8)
+    h = np.zeros((1, 375, 540), np.float32)
+    t = timeit(lambda: predict_view_disparities(c, net, (7, 7), h, device), runs=runs)
+    rows.append({"model": "depth_net", "preset": "fast", "timing": "7x7x375x540", "device": device, **t})
+    print(f"Depth-Net fast 375x540 -> 49 maps on {device}: {t['median_s'] * 1e3:.1f} ms")
+    return rows
+
+
+def bench_refnet(device: str, runs: int, quick: bool) -> list[dict]:
+    rows = []
+    if manifest_entry("refnet", "fast") is None:
+        return rows
+    net = load_model("refnet", "fast", device)
+    for name, lf, _ in synthetic_lfs(2 if quick else 6, (128, 128), seed=9000):
+        ref = focal_stack(lf)
+        x = torch.from_numpy(lf).to(device).permute(0, 1, 4, 2, 3).float().div(255)[None]
+        with torch.inference_mode():
+            out = (net(x)[0].permute(0, 2, 3, 1).mul(255).add(0.5).clamp(0, 255).byte().cpu().numpy())
+        rows.append({"model": "refnet", "lf": name, "psnr_vs_sas": capped(float(np.mean(psnr(ref, out)))),
+                     "ssim_vs_sas": float(np.mean(ssim(ref, out)))})
+        print(f"RefNet {name:18s} vs SaS: {rows[-1]['psnr_vs_sas']:.2f} dB / {rows[-1]['ssim_vs_sas']:.4f}")
+    size = (128, 160) if quick else (375, 540)
+    lf = synth_clip(1, 7, size, seed=1).lf[0]
+    x = torch.from_numpy(lf).to(device).permute(0, 1, 4, 2, 3).float().div(255)[None]
+
+    def refnet():
+        with torch.inference_mode():
+            net(x)
+            if device.startswith("cuda"):
+                torch.cuda.synchronize()
+
+    for method, fn in (("refnet fast", refnet), ("sas", lambda: focal_stack(lf)),
+                       ("fourier", lambda: focal_stack(lf, method="fourier"))):
+        t = timeit(fn, runs=runs)
+        rows.append({"model": "refnet", "timing": f"7x7x{size[0]}x{size[1]}", "method": method,
+                     "device": device if method.startswith("refnet") else "cpu", **t})
+        print(f"focal stack 16 planes {method:12s}: {t['median_s'] * 1e3:8.1f} ms")
+    return rows
+
+
+def main(argv=None) -> dict:
+    p = parser(__doc__)
+    p.add_argument("--device", default="cpu")
+    args = p.parse_args(argv)
+    runs = 1 if args.quick else args.runs
+    results = bench_hance(args.device, runs, args.quick) + bench_depth(args.device, runs, args.quick)
+    results += bench_refnet(args.device, runs, args.quick)
+    return emit(args, results)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,196 @@
+"""Depth-Net (seed §3.3.1.2, Figs. 3.2-3.3): one disparity map per view from the centre view.
+
+Architecture: a 7x7 strided stem, strided down-sampling stages of residual bottleneck
+blocks with instance norm, transposed-convolution up-samplers with additive skips from
+the encoder, and a 3x3 head with ``U*V`` output channels, ``tanh`` scaled to
+``max_disparity``. The input is padded (reflect) to a multiple of the total stride and
+the output cropped back. With ``hint=True`` the encoder's depth hint (scaled by
+``max_disparity``) is a fourth input channel and the output is the hint plus the predicted
+per-view correction (so the untrained network reproduces the hint).
+
+``out_stride`` > 1 (the ``fast`` preset) stops the decoder at that fraction of the input
+resolution and upsamples the disparities bilinearly: disparity is smooth where it matters
+for warping and the full-resolution layers dominate the CPU time.
+
+Output convention: ``d[u, v]`` is the disparity of view ``(u, v)`` in pixels per view step
+(lfstream's HCI sign); view ``(u, v)`` is synthesised by
+``L(x, u) = C(x + (u - u0) * d(x, u))`` (:func:`lfstream.warp.warp_views_per_view`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from lfstream._layers import Bottleneck, count_params
+from lfstream.errors import LFShapeError, LFValueError
+
+
+@dataclass(frozen=True)
+class DepthNetConfig:
+    """Shape of Depth-Net.
+
+    Attributes:
+        views: ``(U, V)``: one output map per view.
+        stem: channels of the 7x7 stride-2 stem.
+        stages: ``(channels, blocks)`` per encoder stage; each stage halves the resolution.
+        expansion: bottleneck width = channels / expansion.
+        out_stride: resolution of the predicted maps relative to the input (1, 2, 4, ...).
+        max_disparity: output range ``[-max, max]`` px per view step.
+        hint: take the depth hint as a fourth input channel.
+    """
+
+    views: tuple[int, int] = (7, 7)
+    stem: int = 64
+    stages: tuple[tuple[int, int], ...] = ((256, 3), (512, 4), (1024, 6), (2048, 3))
+    expansion: int = 4
+    out_stride: int = 1
+    max_disparity: float = 4.0
+    hint: bool = False
+
+    @property
+    def multiple(self) -> int:
+        return 2 ** (1 + len(self.stages))
+
+
+DEPTH_PRESETS: dict[str, DepthNetConfig] = {
+    "paper": DepthNetConfig(stem=64, stages=((256, 3), (512, 4), (1024, 9), (2048, 3))),
+    # The fast preset refines the encoder's depth hint: a monocular Depth-Net trained on
+    # synthetic scenes did not beat flat disparity (bench/networks.py, closing note of #6).
+    "fast": DepthNetConfig(stem=16, stages=((32, 1), (48, 1), (64, 1), (96, 1)), expansion=2, out_stride=4,
+                           hint=True),
+}
+
+
+class DepthNet(nn.Module):
+    """Per-view disparity from the centre view (and optionally the depth hint).
+
+    Shape:
+        - centre: ``(B, 3, H, W)`` float in ``[0, 1]``; hint: ``(B, 1, H, W)`` px per view step
+        - output: ``(B, U, V, H, W)`` float32, px per view step
+    """
+
+    def __init__(self, config: DepthNetConfig = DEPTH_PRESETS["fast"]) -> None:
+        super().__init__()
+        self.config = config
+        cin = 4 if config.hint else 3
+        self.stem = nn.Sequential(nn.Conv2d(cin, config.stem, 7, stride=2, padding=3, bias=False),
+                                  nn.InstanceNorm2d(config.stem, affine=True), nn.ELU())
+        self.down = nn.ModuleList()
+        prev = config.stem
+        widths = [config.stem]
+        for channels, blocks in config.stages:
+            mid = max(channels // config.expansion, 8)
+            stage = [Bottleneck(prev, mid, channels, "instance", "elu", stride=2)]
+            stage += [Bottleneck(channels, mid, channels, "instance", "elu") for _ in range(blocks - 1)]
+            self.down.append(nn.Sequential(*stage))
+            widths.append(channels)
+            prev = channels
+        # up-samplers: from the deepest level back to the stem's resolution (stride 2), and
+        # one more to full resolution only when out_stride == 1
+        levels = len(config.stages)
+        stop = {1: -1, 2: 0}.get(config.out_stride, None)
+        if stop is None:  # out_stride 4, 8, ...: stop at stage (log2(out_stride) - 1)
+            stop = int(round(torch.log2(torch.tensor(float(config.out_stride))).item())) - 1
+        self.up = nn.ModuleList()
+        self.skip_index: list[int] = []
+        for level in range(levels - 1, stop - 1, -1):
+            target = widths[level] if level >= 0 else max(config.stem // 2, 16)
+            self.up.append(nn.Sequential(nn.ConvTranspose2d(prev, target, 2, stride=2), nn.ELU()))
+            self.skip_index.append(level)
+            prev = target
+        self.head = nn.Conv2d(prev, config.views[0] * config.views[1], 3, padding=1)
+        nn.init.zeros_(self.head.bias)
+        nn.init.normal_(self.head.weight, std=1e-3)  # start near flat disparity
+
+    def forward(self, centre: torch.Tensor, hint: torch.Tensor | None = None) -> torch.Tensor:
+        cfg = self.config
+        b, _, h, w = centre.shape
+        x = centre * 2 - 1
+        if cfg.hint:
+            if hint is None:
+                raise LFShapeError("this Depth-Net takes the depth hint as an input; pass hint=")
+            x = torch.cat([x, hint / cfg.max_disparity], 1)
+        m = cfg.multiple
+        # pad to a multiple of the total stride, and to at least 2 x 2 at the deepest level
+        # (instance norm needs more than one spatial element)
+        ph, pw = max((-h) % m, 2 * m - h), max((-w) % m, 2 * m - w)
+        if ph or pw:
+            mode = "reflect" if ph < h and pw < w else "replicate"
+            x = F.pad(x, (0, pw, 0, ph), mode=mode)
+        feats = [self.stem(x)]
+        for stage in self.down:
+            feats.append(stage(feats[-1]))
+        y = feats[-1]
+        for up, level in zip(self.up, self.skip_index):
+            y = up(y)
+            if level >= 0:
+                y = y + feats[level]
+        d = torch.tanh(self.head(y)) * cfg.max_disparity
+        if cfg.out_stride > 1:
+            d = F.interpolate(d, scale_factor=cfg.out_stride, mode="bilinear", align_corners=False)
+        d = d[:, :, :h, :w]
+        if cfg.hint:
+            d = d + hint  # the hint variant predicts a per-view correction of the hint
+        return d.reshape(b, cfg.views[0], cfg.views[1], h, w)
+
+
+def depth_net(centre: torch.Tensor, model: DepthNet, hint: torch.Tensor | None = None) -> torch.Tensor:
+    """Per-view disparities of a batch of centre views (see :class:`DepthNet`)."""
+    if centre.ndim != 4 or centre.shape[1] != 3:
+        raise LFShapeError(f"centre: expected (B, 3, H, W), got {tuple(centre.shape)}")
+    return model(centre, hint)
+
+
+def grid_disparities(maps: torch.Tensor | "np.ndarray", views: tuple[int, int]):
+    """Maps a network's per-view disparities onto another view grid.
+
+    Disparity is per view step, so the view at offset ``(du, dv)`` from the centre takes the
+    network's map at the same offset; offsets beyond the network's grid take its outermost
+    map on that side (a larger grid than the one trained for).
+
+    Shape:
+        - maps: ``(..., Un, Vn, H, W)``; output: ``(..., U, V, H, W)``
+    """
+    un, vn = maps.shape[-4], maps.shape[-3]
+    u, v = views
+    iu = [min(max(k - u // 2 + un // 2, 0), un - 1) for k in range(u)]
+    iv = [min(max(k - v // 2 + vn // 2, 0), vn - 1) for k in range(v)]
+    return maps[..., iu, :, :, :][..., iv, :, :]
+
+
+@torch.inference_mode()
+def predict_view_disparities(centres: np.ndarray, model: DepthNet, views: tuple[int, int],
+                             hints: np.ndarray | None = None, device: str | torch.device = "cpu") -> np.ndarray:
+    """Per-view disparities of a batch of decoded centre views, on the stream's view grid.
+
+    Shape:
+        - centres: ``(B, H, W, 3)`` uint8; hints: ``(B, H, W)`` float32 (when the model takes one)
+        - output: ``(B, U, V, H, W)`` float32
+    """
+    if centres.ndim != 4 or centres.shape[-1] != 3:
+        raise LFShapeError(f"centres: expected (B, H, W, 3), got {tuple(centres.shape)}")
+    x = torch.from_numpy(np.ascontiguousarray(centres)).to(device).permute(0, 3, 1, 2).float().div_(255.0)
+    h = None
+    if model.config.hint:
+        if hints is None:
+            raise LFValueError("this Depth-Net refines the encoder's depth hint, and the stream carries none "
+                               "(encode with --depth-hint, or decode with --depth flat)")
+        h = torch.from_numpy(np.ascontiguousarray(hints, np.float32)).to(device)[:, None]
+    maps = model(x, h).float().cpu().numpy()
+    return np.ascontiguousarray(grid_disparities(maps, views))
+
+
+def build_depth_net(preset: str = "fast", views: tuple[int, int] = (7, 7), hint: bool | None = None) -> DepthNet:
+    from dataclasses import replace
+
+    cfg = DEPTH_PRESETS[preset]
+    return DepthNet(replace(cfg, views=tuple(views), hint=cfg.hint if hint is None else hint))
+
+
+__all__ = ["DepthNetConfig", "DEPTH_PRESETS", "DepthNet", "depth_net", "grid_disparities", "predict_view_disparities", "build_depth_net", "count_params"]

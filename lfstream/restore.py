@@ -1,0 +1,115 @@
+"""JPEG-Hance (seed §3.3.1.1, Fig. 3.1): a residual CNN that removes JPEG artefacts from
+the decoded centre view.
+
+Architecture: a 3x3 stem, stages of residual bottleneck blocks (1x1 -> 3x3 -> 1x1, batch
+norm + ELU) joined by channel-changing 1x1 convolutions, a long skip from the stem to the
+last stage, and a final 3x3 convolution whose tanh-bounded output is added to the input.
+Images are scaled to ``[-1, 1]`` inside the network; the functions here take and return
+float in ``[0, 1]``.
+
+Presets (the same code): ``paper`` (≈ 202k parameters, the seed's size) and ``fast``
+(narrower, chosen by measured CPU time; see ``bench/networks.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import torch
+from torch import nn
+
+from lfstream._layers import Bottleneck, count_params
+from lfstream.errors import LFShapeError
+
+
+@dataclass(frozen=True)
+class HanceConfig:
+    """Widths of JPEG-Hance.
+
+    Attributes:
+        stem: channels after the 3x3 stem (and of the long skip).
+        stages: ``(channels, blocks)`` per stage; a 1x1 conv changes the width between stages.
+    """
+
+    stem: int = 64
+    stages: tuple[tuple[int, int], ...] = ((64, 2), (96, 2), (64, 2))
+
+
+HANCE_PRESETS: dict[str, HanceConfig] = {
+    "paper": HanceConfig(stem=64, stages=((64, 2), (100, 4), (64, 2))),
+    "fast": HanceConfig(stem=16, stages=((16, 1),)),
+}
+
+
+class JPEGHance(nn.Module):
+    """JPEG artefact removal network.
+
+    Shape:
+        - input: ``(B, 3, H, W)`` float in ``[0, 1]`` (any H, W)
+        - output: same shape, float in ``[0, 1]``
+    """
+
+    def __init__(self, config: HanceConfig = HANCE_PRESETS["fast"]) -> None:
+        super().__init__()
+        self.config = config
+        self.stem = nn.Sequential(nn.Conv2d(3, config.stem, 3, padding=1), nn.ELU())
+        layers: list[nn.Module] = []
+        prev = config.stem
+        for channels, blocks in config.stages:
+            if channels != prev:
+                layers += [nn.Conv2d(prev, channels, 1), nn.ELU()]
+            layers += [Bottleneck(channels, max(channels // 2, 4), channels, "batch", "elu") for _ in range(blocks)]
+            prev = channels
+        if prev != config.stem:
+            layers += [nn.Conv2d(prev, config.stem, 1), nn.ELU()]
+        self.body = nn.Sequential(*layers)
+        self.head = nn.Conv2d(config.stem, 3, 3, padding=1)
+        # Start as the identity: the untrained network returns its input.
+        nn.init.zeros_(self.head.weight)
+        nn.init.zeros_(self.head.bias)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        s = x * 2 - 1
+        f = self.stem(s)
+        r = torch.tanh(self.head(self.body(f) + f))  # long skip, bounded correction
+        return ((s + r).clamp(-1, 1) + 1) * 0.5
+
+
+def jpeg_hance(image: torch.Tensor, model: JPEGHance) -> torch.Tensor:
+    """Restores JPEG-decoded images; pure function of ``image`` for a model in eval mode.
+
+    Args:
+        image: float in ``[0, 1]``.
+        model: a (trained) :class:`JPEGHance`.
+
+    Shape:
+        - image: ``(B, 3, H, W)`` or ``(3, H, W)``; output: the same
+    """
+    if image.ndim not in (3, 4) or image.shape[-3] != 3:
+        raise LFShapeError(f"image: expected (B, 3, H, W) or (3, H, W), got {tuple(image.shape)}")
+    batched = image if image.ndim == 4 else image[None]
+    out = model(batched)
+    return out if image.ndim == 4 else out[0]
+
+
+@torch.inference_mode()
+def restore_images(images: np.ndarray, model: JPEGHance, device: str | torch.device = "cpu") -> np.ndarray:
+    """JPEG-Hance on decoded uint8 images, one batched forward pass.
+
+    Shape:
+        - images: ``(B, H, W, 3)`` uint8; output: the same
+    """
+    if images.ndim != 4 or images.shape[-1] != 3 or images.dtype != np.uint8:
+        raise LFShapeError(f"images: expected (B, H, W, 3) uint8, got {images.dtype} {tuple(images.shape)}")
+    x = torch.from_numpy(np.ascontiguousarray(images)).to(device).permute(0, 3, 1, 2).float().div_(255.0)
+    y = model(x).mul_(255.0).add_(0.5).clamp_(0, 255).to(torch.uint8)
+    return np.ascontiguousarray(y.permute(0, 2, 3, 1).cpu().numpy())
+
+
+def build_jpeg_hance(preset: str = "fast") -> JPEGHance:
+    return JPEGHance(HANCE_PRESETS[preset])
+
+
+__all__ = ["HanceConfig", "HANCE_PRESETS", "JPEGHance", "jpeg_hance", "restore_images", "build_jpeg_hance", "count_params"]

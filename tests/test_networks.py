@@ -1,0 +1,207 @@
+"""JPEG-Hance, Depth-Net, RefNet: architectures, presets, losses, shipped weights.
+
+Tolerances: parameter counts of the paper presets within 2 % of the seed's; float32
+module/function agreement 1e-6; shipped-weight quality thresholds are margins below the
+values measured by bench/networks.py (stated at each assert).
+"""
+
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import shared
+from lfstream.codec import decode_jpeg, encode_jpeg
+from lfstream.depth_net import DepthNet, build_depth_net, grid_disparities, predict_view_disparities
+from lfstream.errors import LFShapeError, LFValueError, WeightsError
+from lfstream.losses import depth_net_loss, psi, refnet_loss, ssim_torch, warp_per_view
+from lfstream.metrics import mpsnr, psnr, ssim
+from lfstream.refnet import RefNet, build_refnet
+from lfstream.restore import build_jpeg_hance, jpeg_hance, restore_images
+from lfstream.synth import fronto_parallel_plane, synth_clip
+from lfstream.warp import warp_views, warp_views_per_view
+from lfstream.weights import (REGISTRY, ModelSpec, count_params, list_models, load_model, manifest_entry,
+                              register, spec)
+
+SEED_PARAMS = {"jpeg_hance": 202_435, "depth_net": 38_200_000, "refnet": 12_500_000}
+
+
+@pytest.mark.parametrize("name", sorted(SEED_PARAMS))
+def test_paper_preset_parameter_counts(name):
+    n = count_params(spec(name, "paper").build())
+    assert abs(n - SEED_PARAMS[name]) / SEED_PARAMS[name] < 0.02, (name, n)
+
+
+def test_manifest_counts_match_built_models():
+    shipped = [m for m in list_models() if m["weights"]]
+    assert {(m["name"], m["preset"]) for m in shipped} >= {("jpeg_hance", "fast"), ("depth_net", "fast"), ("refnet", "fast")}
+    for m in shipped:
+        entry = manifest_entry(m["name"], m["preset"])
+        assert entry["params"] == count_params(spec(m["name"], m["preset"]).build(**_views_of(entry)))
+        assert len(entry["sha256"]) == 64 and entry["recipe"]["model"] == m["name"]
+
+
+def _views_of(entry):
+    v = entry["config"].get("views")
+    return {"views": tuple(v)} if v else {}
+
+
+def test_registry_refuses_duplicates():
+    s = REGISTRY[("refnet", "fast")]
+    with pytest.raises(LFValueError, match="already registered"):
+        register(ModelSpec(s.name, s.preset, s.model_cls, s.config_cls, s.config))
+    with pytest.raises(LFValueError, match="unknown model"):
+        spec("refnet", "huge")
+
+
+def test_corrupt_or_missing_weights_are_clear_errors(tmp_path):
+    entry = manifest_entry("jpeg_hance", "fast")
+    src = load_model.__globals__["WEIGHTS_DIR"] / entry["file"]
+    bad = tmp_path / "w.pt"
+    shutil.copy(src, bad)
+    data = bytearray(bad.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    bad.write_bytes(bytes(data))
+    with pytest.raises(WeightsError, match="SHA-256"):
+        load_model("jpeg_hance", "fast", path=bad, sha256=entry["sha256"])
+    with pytest.raises(WeightsError, match="missing"):
+        load_model("jpeg_hance", "fast", path=tmp_path / "nope.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(WeightsError, match="not a valid"):
+        load_model("jpeg_hance", "fast", path=tmp_path / "junk.pt")
+    with pytest.raises(WeightsError, match="no trained weights"):
+        load_model("refnet", "paper")
+
+
+def test_untrained_hance_is_identity_and_function_matches_module():
+    torch.manual_seed(0)
+    model = build_jpeg_hance("fast").eval()
+    x = torch.rand(2, 3, 19, 23)
+    with torch.no_grad():
+        assert torch.allclose(model(x), x, atol=1e-6)
+        for p in model.head.parameters():
+            p.normal_(0, 0.1)
+        assert torch.allclose(jpeg_hance(x, model), model(x), atol=1e-6)
+        assert torch.allclose(jpeg_hance(x[0], model), model(x[:1])[0], atol=1e-6)
+    with pytest.raises(LFShapeError):
+        jpeg_hance(torch.rand(4, 8, 8), model)
+
+
+@pytest.mark.parametrize("size", [(1, 1), (7, 33), (40, 64)])
+def test_depth_net_any_size_and_finite_on_constant_images(size):
+    torch.manual_seed(0)
+    net = build_depth_net("fast", views=(5, 3)).eval()
+    x = torch.full((2, 3, *size), 0.5)  # zero variance: instance norm must stay finite
+    hint = torch.zeros(2, 1, *size)
+    with torch.no_grad():
+        d = net(x, hint)
+    assert d.shape == (2, 5, 3, *size) and torch.isfinite(d).all()
+    assert d.abs().max() <= net.config.max_disparity + 1e-6
+
+
+def test_untrained_hint_depth_net_reproduces_the_hint():
+    torch.manual_seed(0)
+    net = build_depth_net("fast").eval()
+    hint = torch.rand(1, 1, 32, 48) * 2 - 1
+    with torch.no_grad():
+        d = net(torch.rand(1, 3, 32, 48), hint)
+    assert (d - hint[:, :, None]).abs().mean() < 0.1  # head weights initialised at 1e-3 scale
+
+
+def test_grid_disparities_maps_offsets():
+    maps = np.arange(49, dtype=np.float32).reshape(7, 7, 1, 1)
+    assert grid_disparities(maps, (7, 7))[..., 0, 0].tolist() == maps[..., 0, 0].tolist()
+    assert grid_disparities(maps, (5, 5))[..., 0, 0][2, 2] == 24
+    g = grid_disparities(maps, (9, 9))[..., 0, 0]
+    assert g[0, 0] == 0 and g[8, 8] == 48 and g[4, 4] == 24
+
+
+def test_warp_per_view_matches_warp_views_for_one_plane(rng):
+    centre = rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)
+    maps = np.full((3, 5, 30, 40), 0.75, np.float32)
+    a = warp_views_per_view(centre, maps)
+    b = warp_views(centre, 0.75, (3, 5), occlusion=False)
+    assert np.abs(a.astype(int) - b).max() <= 1
+    with pytest.raises(LFShapeError):
+        warp_views_per_view(centre, maps[..., :10])
+    t = warp_per_view(torch.from_numpy(centre).permute(2, 0, 1).float()[None] / 255, torch.from_numpy(maps)[None])
+    t8 = (t[0].permute(0, 1, 3, 4, 2) * 255 + 0.5).clamp(0, 255).byte().numpy()
+    assert np.abs(t8.astype(int) - a).max() <= 1
+
+
+@pytest.mark.parametrize("views", [(5, 5), (3, 7)])
+def test_refnet_any_grid_and_untrained_is_view_mean(views):
+    torch.manual_seed(0)
+    net = build_refnet("fast", views=views).eval()
+    lf = torch.rand(1, *views, 3, 20, 26)
+    with torch.no_grad():
+        out = net(lf)
+    assert out.shape == (1, 16, 3, 20, 26)
+    assert torch.allclose(out, lf.mean(dim=(1, 2))[:, None].expand_as(out), atol=1e-6)
+    with pytest.raises(LFShapeError, match="RefNet built for"):
+        net(torch.rand(1, 7, 7, 3, 20, 26))
+    with torch.no_grad():
+        assert torch.isfinite(net(torch.full((1, *views, 3, 8, 8), 0.3))).all()
+
+
+def test_losses():
+    torch.manual_seed(0)
+    a, b = torch.rand(2, 3, 24, 24), torch.rand(2, 3, 24, 24)
+    assert float(psi(a, a, 0.5)) == pytest.approx(0.0, abs=1e-6)
+    assert float(psi(a, b, 0.5)) > 0.1
+    # the differentiable SSIM agrees with the float64 metric (same window, valid region)
+    ref = float(np.mean([ssim(x.permute(1, 2, 0).numpy(), y.permute(1, 2, 0).numpy(), data_range=1.0)
+                         for x, y in zip(a, b)]))
+    assert float(ssim_torch(a, b)) == pytest.approx(ref, abs=1e-3)
+    stack = torch.rand(1, 16, 3, 16, 16)
+    assert float(refnet_loss(stack, (stack + 0.01).clamp(0, 1))) < float(refnet_loss(stack, torch.rand_like(stack)))
+
+
+def test_depth_loss_prefers_the_true_disparity():
+    clip = fronto_parallel_plane(5, (48, 48), 1.0, seed=3)
+    lf = torch.from_numpy(clip.lf[0]).permute(0, 1, 4, 2, 3).float()[None] / 255
+    centre = lf[:, 2, 2]
+    right, _ = depth_net_loss(centre, lf, torch.full((1, 5, 5, 48, 48), 1.0))
+    wrong, _ = depth_net_loss(centre, lf, torch.full((1, 5, 5, 48, 48), -1.0))
+    flat, _ = depth_net_loss(centre, lf, torch.zeros(1, 5, 5, 48, 48))
+    assert float(right) < 0.5 * min(float(wrong), float(flat))
+
+
+# --- shipped weights: quality floors below the measured values (bench/networks.py) ----------
+
+
+def test_shipped_depth_net_beats_flat_on_a_real_light_field():
+    import lfstream
+    from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_disparity
+
+    lf = lfstream.read_lf(shared("seahorse5x5", "camImagesFlat"))[:, :, 150:278, 150:310]
+    centre = decode_jpeg(encode_jpeg(lf[2, 2], 50), lf.shape[2:4])
+    hint = decode_hint(encode_hint(estimate_disparity(lf)), centre.shape[:2], guide=centre)
+    maps = predict_view_disparities(centre[None], load_model("depth_net"), (5, 5), hint[None])[0]
+    net = mpsnr(lf, warp_views_per_view(centre, maps))
+    flat = mpsnr(lf, warp_views(centre, 0.0, (5, 5)))
+    assert net > flat + 1.0, (net, flat)  # measured on the full view: 32.9 vs 29.1 dB
+
+
+def test_shipped_hance_improves_low_quality_jpeg():
+    import lfstream
+
+    view = lfstream.read_lf(shared("seahorse5x5", "camImagesFlat"))[2, 2, 100:356, 100:356]
+    dec = decode_jpeg(encode_jpeg(view, 10), view.shape[:2])
+    out = restore_images(dec[None], load_model("jpeg_hance"))[0]
+    assert psnr(view, out) > psnr(view, dec) + 0.1  # measured +0.43 dB on the full view at q10
+
+
+def test_shipped_refnet_close_to_sas():
+    from lfstream.refocus import focal_stack
+
+    lf = synth_clip(1, 7, (64, 80), seed=77, motion=0, camera_pan=0).lf[0]
+    out = focal_stack(lf, method="refnet")
+    ref = focal_stack(lf)
+    assert out.shape == ref.shape and out.dtype == np.uint8
+    assert float(np.mean(psnr(ref, out))) > 30.0  # measured 34-47 dB on held-out 128x128 scenes
+    with pytest.raises(LFValueError, match="sixteen"):
+        focal_stack(lf, [0.5, 1.0], method="refnet")
+    with pytest.raises(LFValueError, match="7x7"):
+        focal_stack(lf[1:6, 1:6], method="refnet")

@@ -1,0 +1,382 @@
+"""Train lfstream's networks on synthetic light fields (seed stages, resumable, CPU or GPU).
+
+Stages, as in the seed: ``jpeg_hance`` (MSE on JPEG crops), ``depth_net`` (unsupervised
+loss, JPEG-Hance frozen in front of it), ``refnet`` (SaS focal-stack labels). ``all`` runs
+the three in order (Depth-Net uses the JPEG-Hance just trained).
+
+    python tools/train.py all --preset fast --device cuda --out runs/fast --ship
+    python tools/train.py depth_net --steps 4000 --resume --out runs/fast
+
+Every run is seeded; checkpoints (model, optimiser, step) are written every
+``--checkpoint-every`` steps to ``OUT/NAME-PRESET.ckpt`` and ``--resume`` continues from
+them; losses and validation metrics go to ``OUT/NAME-PRESET.log.jsonl``. ``--ship`` writes
+the final weights into ``lfstream/weights/`` with their SHA-256, recipe and validation
+metrics (the manifest the package loads from).
+
+No dataset is downloaded: the training set is rendered by :mod:`lfstream.synth` (layered
+textured scenes with occlusion, noise and vignetting), augmented with contrast, brightness
+and hue jitter; validation uses held-out synthetic scenes and, when present, the real
+samples in ``../shared/data``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from lfstream.losses import depth_net_loss, hance_loss, refnet_loss  # noqa: E402
+from lfstream.weights import MODEL_NAMES, load_model, save_checkpoint, ship_weights, spec  # noqa: E402
+
+SHARED = ROOT.parent / "shared" / "data"
+
+
+@dataclass
+class Recipe:
+    """Everything that determines a training run (recorded beside shipped weights)."""
+
+    model: str
+    preset: str = "fast"
+    steps: int = 2000
+    batch: int = 16
+    lr: float = 1e-3
+    crop: int = 64
+    samples: int = 256
+    views: int = 7
+    size: int = 128
+    quality: int = 50
+    seed: int = 0
+    time_limit_s: float = 0.0  # stop early (and record the steps done) when > 0
+
+
+DEFAULT_STEPS = {"jpeg_hance": 3000, "depth_net": 3000, "refnet": 3000}
+DEFAULT_BATCH = {"jpeg_hance": 32, "depth_net": 8, "refnet": 8}
+DEFAULT_CROP = {"jpeg_hance": 64, "depth_net": 96, "refnet": 128}
+
+
+# ---------------------------------------------------------------------------------------
+# data
+
+
+def _render_sample(args: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """One synthetic LF and the depth hint the codec would send for it (encoded, decoded)."""
+    from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_disparity
+    from lfstream.synth import SynthConfig, render_clip
+
+    seed, views, size = args
+    rng = np.random.default_rng(seed)
+    far, near = -rng.uniform(0.3, 2.5), rng.uniform(0.3, 2.5)
+    cfg = SynthConfig(frames=1, views=views, size=(size, size), layers=int(rng.integers(1, 7)),
+                      disparity_range=(float(far), float(near)), slanted_background=bool(rng.random() < 0.5),
+                      motion=0.0, camera_pan=0.0, noise=float(rng.choice([0.0, 1.0, 3.0])),
+                      vignetting=float(rng.choice([0.0, 0.0, 0.3])), seed=seed)
+    lf = render_clip(cfg).lf[0]
+    opts = HintOptions()
+    centre = jpeg_roundtrip(np.ascontiguousarray(lf[views // 2, views // 2]), 50)
+    hint = decode_hint(encode_hint(estimate_disparity(lf, opts), opts), (size, size), guide=centre)
+    return lf, hint.astype(np.float32)
+
+
+def render_dataset(count: int, views: int, size: int, seed: int, workers: int) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` synthetic LFs ``(N, U, V, H, W, 3)`` uint8 and their decoded depth hints ``(N, H, W)``."""
+    jobs = [(seed * 100003 + k, views, size) for k in range(count)]
+    if workers > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            out = list(pool.map(_render_sample, jobs, chunksize=4))
+    else:
+        out = [_render_sample(j) for j in jobs]
+    return np.stack([o[0] for o in out]), np.stack([o[1] for o in out])
+
+
+def jpeg_roundtrip(img: np.ndarray, quality: int) -> np.ndarray:
+    """uint8 RGB through the codec's JPEG (same encoder as lfstream.codec)."""
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR), [int(cv2.IMWRITE_JPEG_QUALITY), quality])
+    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+
+
+def augment(batch: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Contrast, brightness and hue jitter (the seed's augmentations), per item, uint8 in/out.
+
+    Shape: ``(B, ..., 3)``; the same jitter applies to every view of an item.
+    """
+    out = np.empty_like(batch)
+    for i, item in enumerate(batch):
+        x = item.astype(np.float32) / 255.0
+        contrast, bright, hue = rng.uniform(0.7, 1.3), rng.uniform(-0.1, 0.1), rng.uniform(-0.3, 0.3)
+        mean = x.mean()
+        x = (x - mean) * contrast + mean + bright
+        # hue: rotate the chroma plane of YIQ by `hue` radians
+        yiq = np.array([[0.299, 0.587, 0.114], [0.596, -0.274, -0.322], [0.211, -0.523, 0.312]], np.float32)
+        c, s = math.cos(hue), math.sin(hue)
+        rot = np.array([[1, 0, 0], [0, c, -s], [0, s, c]], np.float32)
+        m = np.linalg.inv(yiq) @ rot @ yiq
+        x = x @ m.T.astype(np.float32)
+        out[i] = np.clip(x * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    return out
+
+
+def _to_tensor(img: np.ndarray, device) -> torch.Tensor:
+    """``(..., H, W, 3)`` uint8 to ``(..., 3, H, W)`` float32 in [0, 1]."""
+    t = torch.from_numpy(np.ascontiguousarray(img)).to(device)
+    return t.movedim(-1, -3).float().div_(255.0)
+
+
+# ---------------------------------------------------------------------------------------
+# validation
+
+
+def _psnr(a: torch.Tensor, b: torch.Tensor) -> float:
+    mse = float(torch.mean((a.double() - b.double()) ** 2))
+    return 100.0 if mse == 0 else 10 * math.log10(1.0 / mse)
+
+
+def real_centre_views() -> list[tuple[str, np.ndarray]]:
+    """Centre views of the real samples when ``../shared/data`` is present."""
+    out = []
+    try:
+        from lfstream.io import read_lf
+
+        if (SHARED / "seahorse5x5").exists():
+            lf = read_lf(SHARED / "seahorse5x5" / "camImagesFlat")
+            out.append(("seahorse", lf[lf.shape[0] // 2, lf.shape[1] // 2]))
+        for scene in ("dino", "cotton"):
+            if (SHARED / "hci_star" / scene).exists():
+                lf, mask = read_lf(SHARED / "hci_star" / scene, return_mask=True)
+                out.append((scene, lf[lf.shape[0] // 2, lf.shape[1] // 2]))
+    except Exception as exc:  # validation on real data is optional (e.g. on the GPU machine)
+        print(f"real samples unavailable: {exc}", file=sys.stderr)
+    return out
+
+
+@torch.no_grad()
+def validate_hance(model, val_views: np.ndarray, quality: int, device) -> dict:
+    model.eval()
+    res = {}
+    sets = [("synthetic", list(val_views))] + [(n, [v]) for n, v in real_centre_views()]
+    for name, views in sets:
+        gain_p = []
+        for view in views:
+            h, w = (view.shape[0] // 8) * 8, (view.shape[1] // 8) * 8
+            view = view[:h, :w]
+            dec = _to_tensor(jpeg_roundtrip(view, quality), device)[None]
+            ref = _to_tensor(view, device)[None]
+            gain_p.append(_psnr(model(dec), ref) - _psnr(dec, ref))
+        res[f"{name}_psnr_gain_db"] = round(float(np.mean(gain_p)), 3)
+    model.train()
+    return res
+
+
+@torch.no_grad()
+def validate_depth(model, hance, val_lf: np.ndarray, val_hints: np.ndarray, quality: int, device) -> dict:
+    model.eval()
+    from lfstream.losses import warp_per_view
+
+    net_p, flat_p, hint_p = [], [], []
+    for lf, hint in zip(val_lf, val_hints):
+        centre = _to_tensor(jpeg_roundtrip(lf[lf.shape[0] // 2, lf.shape[1] // 2], quality), device)[None]
+        centre = hance(centre) if hance is not None else centre
+        truth = _to_tensor(lf, device)[None]
+        h = torch.from_numpy(hint)[None, None].to(device)
+        d = model(centre, h if model.config.hint else None)
+        net_p.append(_psnr(warp_per_view(centre, d), truth))
+        flat_p.append(_psnr(warp_per_view(centre, torch.zeros_like(d)), truth))
+        hint_p.append(_psnr(warp_per_view(centre, h[:, :, None].expand_as(d[:, :1]).expand_as(d)), truth))
+    model.train()
+    return {"synthetic_mpsnr_net_db": round(float(np.mean(net_p)), 3),
+            "synthetic_mpsnr_flat_db": round(float(np.mean(flat_p)), 3),
+            "synthetic_mpsnr_hint_db": round(float(np.mean(hint_p)), 3)}
+
+
+@torch.no_grad()
+def validate_refnet(model, val_lf: np.ndarray, val_labels: np.ndarray, device) -> dict:
+    model.eval()
+    ps = []
+    for lf, label in zip(val_lf, val_labels):
+        pred = model(_to_tensor(lf, device)[None])
+        ps.append(_psnr(pred, _to_tensor(label, device)[None]))
+    model.train()
+    return {"synthetic_psnr_vs_sas_db": round(float(np.mean(ps)), 3)}
+
+
+# ---------------------------------------------------------------------------------------
+# training loops
+
+
+class Run:
+    """Checkpointing and logging of one model's training."""
+
+    def __init__(self, out: Path, recipe: Recipe, model, resume: bool) -> None:
+        self.out = out
+        self.recipe = recipe
+        self.model = model
+        self.tag = f"{recipe.model}-{recipe.preset}"
+        self.opt = torch.optim.Adam(model.parameters(), lr=recipe.lr)
+        warm = max(1, recipe.steps // 20)
+        # linear warm-up, then cosine decay to 2 % of the peak rate
+        self.sched = torch.optim.lr_scheduler.LambdaLR(
+            self.opt, lambda k: min(1.0, (k + 1) / warm) * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(k, recipe.steps) / recipe.steps))))
+        self.step = 0
+        self.ckpt = out / f"{self.tag}.ckpt"
+        self.log_path = out / f"{self.tag}.log.jsonl"
+        if resume and self.ckpt.exists():
+            state = torch.load(self.ckpt, map_location="cpu", weights_only=False)
+            if state["recipe"] != asdict(recipe):
+                raise SystemExit(f"{self.ckpt}: recipe differs from this run's; refusing to resume")
+            model.load_state_dict(state["model"])
+            self.opt.load_state_dict(state["opt"])
+            self.sched.load_state_dict(state["sched"])
+            self.step = state["step"]
+            print(f"resumed {self.tag} at step {self.step}")
+
+    def save(self) -> None:
+        tmp = self.ckpt.with_suffix(".tmp")
+        torch.save({"model": self.model.state_dict(), "opt": self.opt.state_dict(), "sched": self.sched.state_dict(),
+                    "step": self.step, "recipe": asdict(self.recipe)}, tmp)
+        os.replace(tmp, self.ckpt)
+
+    def log(self, record: dict) -> None:
+        with open(self.log_path, "a") as fh:
+            fh.write(json.dumps({"step": self.step, **record}) + "\n")
+
+    def update(self, loss: torch.Tensor) -> None:
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(self.model.parameters(), 1.0)
+        self.opt.step()
+        self.sched.step()
+        self.step += 1
+
+
+def train(recipe: Recipe, out: Path, device: str, resume: bool, workers: int, checkpoint_every: int,
+          hance=None) -> tuple[torch.nn.Module, dict]:
+    torch.manual_seed(recipe.seed)
+    rng = np.random.default_rng(recipe.seed)
+    t0 = time.perf_counter()
+    data, hints = render_dataset(recipe.samples, recipe.views, recipe.size, recipe.seed, workers)
+    val, val_hints = render_dataset(max(8, recipe.samples // 16), recipe.views, recipe.size, recipe.seed + 7919, workers)
+    print(f"{recipe.model}: rendered {len(data)}+{len(val)} LFs in {time.perf_counter() - t0:.1f} s", flush=True)
+    overrides = {"views": (recipe.views, recipe.views)} if recipe.model != "jpeg_hance" else {}
+    model = spec(recipe.model, recipe.preset).build(**overrides).to(device)
+    run = Run(out, recipe, model, resume)
+    labels = val_labels = None
+    if recipe.model == "refnet":
+        from lfstream.refocus import focal_stack
+
+        labels = np.stack([focal_stack(lf) for lf in data])  # (N, 16, H, W, 3) uint8, SaS
+        val_labels = np.stack([focal_stack(lf) for lf in val])
+    n, u, v, h, w, _ = data.shape
+    c = recipe.crop
+    t0 = time.perf_counter()
+    while run.step < recipe.steps:
+        if recipe.time_limit_s and time.perf_counter() - t0 > recipe.time_limit_s:
+            print(f"{run.tag}: time limit reached at step {run.step}", flush=True)
+            run.save()
+            break
+        idx = rng.integers(0, n, recipe.batch)
+        if recipe.model == "jpeg_hance":
+            # one random view per item, crop on the 8x8 JPEG grid, JPEG round trip
+            imgs = data[idx, rng.integers(0, u, recipe.batch), rng.integers(0, v, recipe.batch)]
+            ys, xs = rng.integers(0, (h - c) // 8 + 1, recipe.batch) * 8, rng.integers(0, (w - c) // 8 + 1, recipe.batch) * 8
+            crops = augment(np.stack([im[y:y + c, x:x + c] for im, y, x in zip(imgs, ys, xs)]), rng)
+            dec = np.stack([jpeg_roundtrip(cr, recipe.quality) for cr in crops])
+            loss = hance_loss(model(_to_tensor(dec, device)), _to_tensor(crops, device))
+            terms = {}
+        elif recipe.model == "depth_net":
+            ys, xs = rng.integers(0, (h - c) // 8 + 1, recipe.batch) * 8, rng.integers(0, (w - c) // 8 + 1, recipe.batch) * 8
+            lfs = augment(np.stack([data[i, :, :, y:y + c, x:x + c] for i, y, x in zip(idx, ys, xs)]), rng)
+            centres = np.stack([jpeg_roundtrip(np.ascontiguousarray(lf[u // 2, v // 2]), recipe.quality) for lf in lfs])
+            centre = _to_tensor(centres, device)
+            if hance is not None:
+                with torch.no_grad():
+                    centre = hance(centre)
+            hint = None
+            if model.config.hint:
+                hint = torch.from_numpy(np.stack([hints[i, y:y + c, x:x + c] for i, y, x in zip(idx, ys, xs)]))
+                hint = hint[:, None].to(device)
+            loss, terms = depth_net_loss(centre, _to_tensor(lfs, device), model(centre, hint))
+        else:
+            lfs = _to_tensor(data[idx], device)
+            loss = refnet_loss(model(lfs), _to_tensor(labels[idx], device))
+            terms = {}
+        if not torch.isfinite(loss):
+            raise SystemExit(f"{run.tag}: non-finite loss at step {run.step}")
+        run.update(loss)
+        if run.step % 50 == 0 or run.step == recipe.steps:
+            run.log({"loss": loss.item(), **terms, "elapsed_s": round(time.perf_counter() - t0, 1)})
+        if run.step % checkpoint_every == 0 or run.step == recipe.steps:
+            run.save()
+            print(f"{run.tag} step {run.step} loss {loss.item():.4f} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    if recipe.model == "jpeg_hance":
+        metrics = validate_hance(model, val[:, u // 2, v // 2], recipe.quality, device)
+    elif recipe.model == "depth_net":
+        metrics = validate_depth(model, hance, val, val_hints, recipe.quality, device)
+    else:
+        metrics = validate_refnet(model, val, val_labels, device)
+    metrics["train_s"] = round(time.perf_counter() - t0, 1)
+    metrics["steps_done"] = run.step
+    metrics["device"] = torch.cuda.get_device_name() if device.startswith("cuda") else "cpu"
+    run.log({"validation": metrics})
+    print(f"{run.tag} validation {metrics}", flush=True)
+    return model.eval(), metrics
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("model", choices=[*MODEL_NAMES, "all"])
+    p.add_argument("--preset", default="fast", choices=["fast", "paper"])
+    p.add_argument("--steps", type=int, help="optimiser steps (default per model)")
+    p.add_argument("--batch", type=int)
+    p.add_argument("--samples", type=int, default=256, help="synthetic LFs rendered for training")
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2) - 1))
+    p.add_argument("--out", type=Path, default=Path("runs"))
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--checkpoint-every", type=int, default=250)
+    p.add_argument("--time-limit", type=float, default=0.0, help="seconds per model; stop early and ship")
+    p.add_argument("--ship", action="store_true", help="write the final weights into lfstream/weights/")
+    args = p.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(max(1, os.cpu_count() or 1))
+    names = list(MODEL_NAMES) if args.model == "all" else [args.model]
+    hance = None
+    for name in names:
+        recipe = Recipe(model=name, preset=args.preset, steps=args.steps or DEFAULT_STEPS[name],
+                        batch=args.batch or DEFAULT_BATCH[name], lr=args.lr, crop=DEFAULT_CROP[name],
+                        samples=args.samples, seed=args.seed, time_limit_s=args.time_limit)
+        if name == "depth_net" and hance is None:
+            try:
+                hance = load_model("jpeg_hance", args.preset, device=args.device)
+            except Exception as exc:
+                print(f"depth_net trains without JPEG-Hance in front ({exc})", file=sys.stderr)
+        model, metrics = train(recipe, args.out, args.device, args.resume, args.workers, args.checkpoint_every,
+                               hance=hance if name == "depth_net" else None)
+        save_checkpoint(model, name, args.preset, args.out / f"{name}-{args.preset}.pt")
+        if name == "jpeg_hance":
+            hance = model
+            for prm in hance.parameters():
+                prm.requires_grad_(False)
+        if args.ship:
+            entry = ship_weights(model.cpu(), name, args.preset, asdict(recipe), metrics)
+            model.to(args.device)
+            print(f"shipped {entry['file']} sha256 {entry['sha256'][:16]}... params {entry['params']}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
