@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 setup: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/lfstream demo
+	$(BIN)/lfstream stream
 
 test: $(STAMP)
 	$(BIN)/python -m pytest tests

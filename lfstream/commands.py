@@ -450,3 +450,129 @@ def _models(args: argparse.Namespace) -> int:
         for m in models:
             print(f"{m['name']:11s} {m['preset']:6s} {m['params']:>11,d} params  weights: {m['weights'] or '-'}")
     return 0
+
+
+# ----------------------------------------------------------------------------------------
+# stream / serve
+
+
+def _add_pipeline_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-o", "--output", type=Path, help="output folder (default: a new ./lfstream-out[-N])")
+    p.add_argument("--refocus", choices=("auto", "refnet", "sas", "fourier", "none"), default="auto",
+                   help="focal-stack renderer (auto: picked per device by measured speed and error)")
+    p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
+    p.add_argument("--batch", type=int, default=1, help="frames per network batch in the decoder")
+    p.add_argument("--depth", choices=("auto", "hint", "flat", "net"), default="auto")
+    p.add_argument("--hance", choices=("auto", "on", "off"), default="auto")
+    p.add_argument("--save", default="mp4", help="comma list of mp4 (one per focal plane), png, sweep, lf")
+    p.add_argument("--no-skip-static", action="store_true", help="always recompute the disparity")
+    p.add_argument("--skip-planes", action="store_true",
+                   help="render focal planes outside the scene's disparity range by a cheap path")
+    p.add_argument("--mssim-every", type=int, default=10, help="MSSIM on every N-th frame (0: never; MPSNR on all)")
+    p.add_argument("--queue-size", type=int, default=4)
+    p.add_argument("--progress", action="store_true", help="a status line on stderr (default when it is a terminal)")
+    p.add_argument("--json", action="store_true")
+
+
+def _pipeline_config(args: argparse.Namespace, **extra):
+    from lfstream.pipeline import StreamConfig
+
+    return StreamConfig(refocus=args.refocus, device=args.device, batch=args.batch, depth=args.depth, hance=args.hance,
+                        save=tuple(s for s in args.save.split(",") if s), skip_static=not args.no_skip_static,
+                        skip_planes=args.skip_planes, mssim_every=args.mssim_every, queue_size=args.queue_size, **extra)
+
+
+def _report(args: argparse.Namespace, summary: dict, out: Path | None) -> None:
+    import sys
+
+    from lfstream.pipeline import write_summary
+
+    if out is not None:
+        write_summary(out, summary)
+    if args.json:
+        emit_json(summary)
+        return
+    sys.stderr.write("\n")
+    print(f"{summary['frames']} frame(s), {summary['fps']} frames/s end to end"
+          + (f", {summary['bpp']:.5f} bpp" if summary.get("bpp") else "")
+          + (f", MPSNR {summary['mpsnr']:.2f} dB" if summary.get("mpsnr") is not None else "")
+          + (f", MSSIM {summary['mssim']:.4f}" if summary.get("mssim") is not None else "")
+          + f", lost {summary['lost']}" + (" (interrupted)" if summary.get("interrupted") else ""))
+    for name, s in summary.get("stages", {}).items():
+        print(f"  {name:9s} {s['frames']:5d} frames  {s['ms_per_frame'] or 0:8.1f} ms/frame")
+    if summary.get("refocus"):
+        print(f"  refocus: {summary['refocus']['method']} ({summary['refocus']['why']})")
+    if out is not None:
+        print(f"  outputs in {out} (summary.json)")
+
+
+@command("stream", "stream an LF video (default: the built-in synthetic clip) through the whole pipeline")
+def _stream_args(p: argparse.ArgumentParser) -> Handler:
+    p.add_argument("input", type=Path, nargs="?", help="LF video / light field (default: built-in synthetic clip)")
+    p.add_argument("--transport", choices=("inproc", "file", "tcp"), default="inproc")
+    p.add_argument("--to", help="HOST:PORT of an `lfstream serve`: send there instead of decoding here")
+    p.add_argument("--quality", type=int, default=50)
+    p.add_argument("--no-depth-hint", action="store_true", help="send only the JPEG centre view")
+    p.add_argument("--frames", type=int, default=12, help="frames of the built-in clip")
+    _add_pipeline_options(p)
+    add_read_options(p)
+    return _stream
+
+
+def _stream(args: argparse.Namespace) -> int:
+    import sys
+
+    from lfstream.pipeline import Pipeline, default_output, file_source, prepare_output, stderr_progress, synthetic_source
+    from lfstream.transport import TcpSender, parse_address
+
+    fps = 30.0
+    if args.input is None:
+        source = synthetic_source(frames=args.frames)
+    else:
+        source, src_fps = file_source(args.input, max_frames=args.max_frames, angular=args.angular, crop=args.crop,
+                                      grid=args.grid, flip_u=args.flip_u, flip_v=args.flip_v)
+        fps = src_fps or fps
+    cfg = _pipeline_config(args, quality=args.quality, depth_hint=not args.no_depth_hint, transport=args.transport,
+                           fps=fps)
+    sender, out = None, None
+    if args.to:
+        sender = TcpSender(*parse_address(args.to))
+    else:
+        out = prepare_output(args.output) if args.output else prepare_output(default_output())
+    progress = stderr_progress if (args.progress or (sys.stderr.isatty() and not args.json)) else None
+    pipe = Pipeline(source, cfg, out, sender=sender, progress=progress,
+                    stream_file=(out / "stream.lfs") if out is not None else None)
+    summary = pipe.run()
+    _report(args, summary, out)
+    return 130 if summary["interrupted"] else 0
+
+
+@command("serve", "receive a stream over TCP, decode, refocus and write the outputs")
+def _serve_args(p: argparse.ArgumentParser) -> Handler:
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default loopback only)")
+    p.add_argument("--port", type=int, default=7820)
+    p.add_argument("--keep-open", action="store_true", help="serve one sender after another until Ctrl-C")
+    p.add_argument("--timeout", type=float, default=300.0, help="seconds to wait for a sender or for data")
+    _add_pipeline_options(p)
+    return _serve
+
+
+def _serve(args: argparse.Namespace) -> int:
+    import sys
+
+    from lfstream.pipeline import Pipeline, default_output, prepare_output, stderr_progress
+    from lfstream.transport import TcpReceiver
+
+    base = args.output or default_output("lfstream-serve")
+    n = 0
+    while True:
+        out = prepare_output(base if n == 0 else base.with_name(f"{base.name}-{n}"))
+        receiver = TcpReceiver(args.host, args.port, timeout_s=args.timeout)
+        if not args.json:
+            print(f"listening on {receiver.address[0]}:{receiver.address[1]} -> {out}", file=sys.stderr)
+        progress = stderr_progress if (args.progress or (sys.stderr.isatty() and not args.json)) else None
+        summary = Pipeline(None, _pipeline_config(args), out, receiver=receiver, progress=progress).run()
+        _report(args, summary, out)
+        n += 1
+        if not args.keep_open or summary["interrupted"]:
+            return 130 if summary["interrupted"] else 0

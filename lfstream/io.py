@@ -341,6 +341,105 @@ def read_mosaic_video(
     return np.ascontiguousarray(np.stack(frames)), fps
 
 
+class VideoWriter:
+    """Incremental video writer (context manager): frames go in one by one, the file is
+    written under a temporary name and renamed when closed, so an interrupted write never
+    leaves a broken file and a closed one is always complete and playable.
+
+    Codecs by extension and ``lossless``: FFV1 (``.mkv``/``.avi``/``.nut``) or x264 RGB at
+    QP 0 (``.mp4``/``.mov``) when lossless; x264 (yuv420p, yuv444p for odd sizes) at ``crf``
+    otherwise; ``.gif`` an animated GIF.
+    """
+
+    def __init__(self, path: str | os.PathLike, fps: float = 30.0, lossless: bool = True, crf: int = 18,
+                 metadata: dict[str, str] | None = None, preset: str = "medium") -> None:
+        self.path = Path(path)
+        ext = self.path.suffix.lower()
+        if ext not in VIDEO_EXTS + (".gif",):
+            raise LFValueError(f"{self.path}: unsupported video extension; use one of {VIDEO_EXTS + ('.gif',)}")
+        self._ext, self._fps, self._lossless, self._crf = ext, fps, lossless, crf
+        self._metadata, self._preset = metadata or {}, preset
+        self._container = None
+        self._stream = None
+        self._size: tuple[int, int] | None = None
+        self._tmp = self.path.with_name(f".{self.path.stem}.tmp{os.getpid()}{ext}")
+        self.frames = 0
+
+    def _open(self, h: int, w: int) -> None:
+        import av
+
+        ext = self._ext
+        if ext == ".gif":
+            codec, pix_fmt, options = "gif", "rgb8", {}
+        elif self._lossless:
+            codec, pix_fmt, options = ("ffv1", "bgr0", {}) if ext in (".mkv", ".avi", ".nut") else (
+                "libx264rgb", "rgb24", {"qp": "0", "preset": "veryfast"})
+        else:
+            # 4:2:0 needs even sizes; odd-sized frames keep full chroma instead of being cropped.
+            pix_fmt = "yuv420p" if h % 2 == 0 and w % 2 == 0 else "yuv444p"
+            codec, options = "libx264", {"crf": str(self._crf), "preset": self._preset}
+        try:
+            self._container = av.open(str(self._tmp), mode="w")
+            for k, v in self._metadata.items():
+                self._container.metadata[k] = v
+            self._stream = self._container.add_stream(codec, rate=Fraction(self._fps).limit_denominator(1001),
+                                                      options=options)
+            self._stream.width, self._stream.height, self._stream.pix_fmt = w, h, pix_fmt
+        except (av.error.FFmpegError, OSError) as exc:  # type: ignore[attr-defined]
+            raise LFFileError(f"{self.path}: cannot open for writing ({exc})") from exc
+        self._size = (h, w)
+
+    def write(self, img: np.ndarray) -> None:
+        import av
+
+        if self._size is None:
+            self._open(img.shape[0], img.shape[1])
+        h, w = self._size
+        if img.shape != (h, w, 3) or img.dtype != np.uint8:
+            raise LFShapeError(f"{self.path}: every frame must be uint8 ({h}, {w}, 3), got {img.dtype} {img.shape}")
+        try:
+            frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(img), format="rgb24")
+            for packet in self._stream.encode(frame):
+                self._container.mux(packet)
+        except av.error.FFmpegError as exc:  # type: ignore[attr-defined]
+            raise LFFileError(f"{self.path}: video encoding failed ({exc})") from exc
+        self.frames += 1
+
+    def close(self) -> None:
+        """Flushes and renames into place (a writer that got no frames leaves nothing)."""
+        import av
+
+        if self._container is None:
+            return
+        try:
+            for packet in self._stream.encode():
+                self._container.mux(packet)
+            self._container.close()
+            os.replace(self._tmp, self.path)
+        except (av.error.FFmpegError, OSError) as exc:  # type: ignore[attr-defined]
+            raise LFFileError(f"{self.path}: video finalisation failed ({exc})") from exc
+        finally:
+            self._container = None
+            self._tmp.unlink(missing_ok=True)
+
+    def __enter__(self) -> "VideoWriter":
+        return self
+
+    def abort(self) -> None:
+        """Discards the file being written."""
+        if self._container is not None:
+            try:
+                self._container.close()
+            except Exception:  # the file is deleted anyway
+                pass
+            self._container = None
+        self._tmp.unlink(missing_ok=True)
+
+    def __exit__(self, exc_type, *exc) -> None:
+        # an exception inside the block discards the half-written file
+        self.abort() if exc_type is not None else self.close()
+
+
 def write_video(
     path: Path,
     frames: Sequence[np.ndarray] | np.ndarray,
@@ -349,54 +448,14 @@ def write_video(
     crf: int = 18,
     metadata: dict[str, str] | None = None,
 ) -> None:
-    """Writes uint8 RGB frames ``(T, H, W, 3)`` to a video file through PyAV.
-
-    Lossless: FFV1 (``.mkv``/``.avi``/``.nut``) or x264 RGB at QP 0 (``.mp4``/``.mov``).
-    Lossy: x264 (yuv420p) at ``crf``. ``.gif``: an animated GIF (256-colour). The file is written to a temporary name and renamed
-    once the container is closed, so an interrupted write never leaves a broken file.
-    """
-    import av
-
+    """Writes uint8 RGB frames ``(T, H, W, 3)`` to a video file through PyAV (see
+    :class:`VideoWriter` for codecs and the atomic rename)."""
     path = Path(path)
     if len(frames) == 0:
         raise LFValueError(f"{path}: no frames to write")
-    h, w = frames[0].shape[:2]
-    ext = path.suffix.lower()
-    if ext not in VIDEO_EXTS + (".gif",):
-        raise LFValueError(f"{path}: unsupported video extension; use one of {VIDEO_EXTS + ('.gif',)}")
-    if ext == ".gif":
-        codec, pix_fmt, options = "gif", "rgb8", {}
-    elif lossless:
-        codec, pix_fmt, options = ("ffv1", "bgr0", {}) if ext in (".mkv", ".avi", ".nut") else (
-            "libx264rgb",
-            "rgb24",
-            {"qp": "0", "preset": "veryfast"},
-        )
-    else:
-        # 4:2:0 needs even sizes; odd-sized frames keep full chroma instead of being cropped.
-        pix_fmt = "yuv420p" if h % 2 == 0 and w % 2 == 0 else "yuv444p"
-        codec, options = "libx264", {"crf": str(crf), "preset": "medium"}
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{ext}")
-    rate = Fraction(fps).limit_denominator(1001)
-    try:
-        with av.open(str(tmp), mode="w") as container:
-            for k, v in (metadata or {}).items():
-                container.metadata[k] = v
-            stream = container.add_stream(codec, rate=rate, options=options)
-            stream.width, stream.height, stream.pix_fmt = w, h, pix_fmt
-            for img in frames:
-                if img.shape != (h, w, 3) or img.dtype != np.uint8:
-                    raise LFShapeError(f"{path}: every frame must be uint8 ({h}, {w}, 3), got {img.dtype} {img.shape}")
-                frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(img), format="rgb24")
-                for packet in stream.encode(frame):
-                    container.mux(packet)
-            for packet in stream.encode():
-                container.mux(packet)
-        os.replace(tmp, path)
-    except av.error.FFmpegError as exc:  # type: ignore[attr-defined]
-        raise LFFileError(f"{path}: video encoding failed ({exc})") from exc
-    finally:
-        tmp.unlink(missing_ok=True)
+    with VideoWriter(path, fps, lossless, crf, metadata) as writer:
+        for img in frames:
+            writer.write(img)
 
 
 # ----------------------------------------------------------------------------------------
@@ -756,6 +815,7 @@ def _npy_bytes(arr: np.ndarray) -> bytes:
 
 __all__ = [
     "LoadedLF",
+    "VideoWriter",
     "load_lf",
     "read_lf",
     "write_lf",

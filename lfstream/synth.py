@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Iterator
 
 import cv2
 import numpy as np
@@ -223,13 +224,10 @@ def _view_warp(layer: _Layer, du: int, dv: int, offset: tuple[float, float], cy:
     return m, (dconst, dy, dx)
 
 
-def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
-    """Renders a clip; deterministic for a given config (including its seed).
-
-    Returns:
-        :class:`SynthClip` with ``lf`` (T, U, V, H, W, 3) uint8 and ``disparity``
-        (T, U, V, H, W) float32 in pixels per view step.
-    """
+def iter_clip(config: SynthConfig = SynthConfig()) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Renders a clip frame by frame (memory of one frame, for long streams); yields
+    ``(lf (U, V, H, W, 3) uint8, disparity (U, V, H, W) float32)``, the same frames as
+    :func:`render_clip`."""
     config.validate()
     rng = np.random.default_rng(config.seed)
     t_n, n = config.frames, config.views
@@ -254,8 +252,8 @@ def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
         vel = rng.uniform(-1, 1, 2) * config.motion
         layers.append(_Layer(_texture(rng, hb, wb), _shape_mask(rng, hb, wb), float(d), (0.0, 0.0), (vel[0], vel[1])))
 
-    lf = np.empty((t_n, n, n, h, w, 3), np.uint8)
-    disp = np.empty((t_n, n, n, h, w), np.float32)
+    lf = np.empty((1, n, n, h, w, 3), np.uint8)
+    disp = np.empty((1, n, n, h, w), np.float32)
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     vig = _vignetting_gains(n, h, w, config.vignetting)
     views = np.empty((n, n, h, w, 3), np.float32)
@@ -263,7 +261,7 @@ def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
         for u in range(n):
             for v in range(n):
                 img = views[u, v]
-                dmap = disp[t, u, v]
+                dmap = disp[0, u, v]
                 for layer in layers:
                     pan = config.camera_pan * t * (1.0 + layer.disparity)  # parallax: near moves more
                     off = (layer.velocity[0] * t, layer.velocity[1] * t + pan)
@@ -307,8 +305,19 @@ def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
             views += std
         np.clip(views, 0.0, 1.0, out=views)
         # one rounding, saturating pass to uint8 (OpenCV), on a 2-D view of the frame
-        lf[t] = cv2.convertScaleAbs(views.reshape(n * n * h, w * 3), alpha=255.0).reshape(n, n, h, w, 3)
-    return SynthClip(lf=lf, disparity=disp, config=config)
+        lf[0] = cv2.convertScaleAbs(views.reshape(n * n * h, w * 3), alpha=255.0).reshape(n, n, h, w, 3)
+        yield lf[0].copy(), disp[0].copy()
+
+
+def render_clip(config: SynthConfig = SynthConfig()) -> SynthClip:
+    """Renders a clip; deterministic for a given config (including its seed).
+
+    Returns:
+        :class:`SynthClip` with ``lf`` (T, U, V, H, W, 3) uint8 and ``disparity``
+        (T, U, V, H, W) float32 in pixels per view step.
+    """
+    frames = list(iter_clip(config))
+    return SynthClip(lf=np.stack([f[0] for f in frames]), disparity=np.stack([f[1] for f in frames]), config=config)
 
 
 @lru_cache(maxsize=8)
@@ -339,4 +348,4 @@ def fronto_parallel_plane(views: int, size: tuple[int, int], disparity: float, s
                                    slanted_background=False, motion=0.0, camera_pan=0.0, seed=seed))
 
 
-__all__ = ["SynthConfig", "SynthClip", "render_clip", "synth_clip", "fronto_parallel_plane"]
+__all__ = ["SynthConfig", "SynthClip", "render_clip", "iter_clip", "synth_clip", "fronto_parallel_plane"]
