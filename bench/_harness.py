@@ -23,8 +23,14 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 
+def _version_of(module: str) -> str | None:
+    try:
+        return __import__(module).__version__
+    except ImportError:  # e.g. a GPU machine without PyAV
+        return None
+
+
 def metadata() -> dict:
-    import av
     import cv2
     import numba
     import torch
@@ -46,7 +52,7 @@ def metadata() -> dict:
     return {
         "commit": commit,
         "versions": {"python": platform.python_version(), "torch": torch.__version__, "numpy": np.__version__,
-                     "numba": numba.__version__, "opencv": cv2.__version__, "av": av.__version__},
+                     "numba": numba.__version__, "opencv": cv2.__version__, "av": _version_of("av")},
         "device": {"cpu": cpu, "cores": os.cpu_count(),
                    "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None},
         "threads": {"torch": torch.get_num_threads(), "numba": numba.get_num_threads()},

@@ -1,0 +1,139 @@
+"""Throughput per stage and end to end, and run time against error.
+
+1. Per stage (ms/frame): encode (flat, hint), decode (flat, hint, Depth-Net), 16-plane focal
+   stack (SaS, RefNet where the grid fits), for 7x7x375x540 (the seed's Lytro crop) and
+   larger light fields, so the growth with U*V and H*W is visible. HEVC decode of the same
+   views is measured in the same run as the decoder's baseline.
+2. End to end: the pipeline on pre-rendered frames (inproc, SaS refocus, no files, no
+   metrics), frames/s, and a batch-size sweep of the Depth-Net decoder.
+3. Run time against error on the seahorse sample: every decoder configuration as a point
+   (decode ms/frame, MPSNR), the Pareto front, and the default marked (PNG in bench/results).
+
+    python bench/throughput.py [--json [FILE]] [--runs N] [--quick] [--device cuda]
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from _harness import ROOT, emit, parser, timeit
+
+import lfstream
+from lfstream.codec import Decoder, Encoder, decode
+from lfstream.bitstream import read_header
+from lfstream.metrics import capped, mpsnr
+from lfstream.pipeline import Pipeline, StreamConfig
+from lfstream.refocus import focal_stack
+from lfstream.synth import synth_clip
+
+
+def stage_rows(views: int, size: tuple[int, int], runs: int, device: str) -> list[dict]:
+    import io
+
+    from lfstream.baseline import decode_views, encode_views
+
+    lf = synth_clip(1, views, size, seed=3, motion=0, camera_pan=0).lf[0]
+    label = f"{views}x{views}x{size[0]}x{size[1]}"
+    rows = []
+
+    def add(stage, fn, r=runs):
+        t = timeit(fn, runs=r)
+        rows.append({"lf": label, "stage": stage, "ms_per_frame": t["median_s"] * 1e3, "iqr_ms": t["iqr_s"] * 1e3})
+        print(f"{label:18s} {stage:28s} {t['median_s'] * 1e3:9.1f} ms")
+
+    add("encode flat", lambda: Encoder().encode_frame(lf, 0, 0))
+    add("encode hint", lambda: Encoder(depth_hint=True).encode_frame(lf, 0, 0), max(1, runs // 2))
+    flat = lfstream.encode(lf)
+    hint = lfstream.encode(lf, depth_hint=True)
+    for name, data, depth in (("decode flat", flat, "flat"), ("decode hint", hint, "hint"), ("decode Depth-Net", hint, "net")):
+        hdr = read_header(io.BytesIO(data))
+        dec = Decoder(hdr, depth=depth, hance="off", device=device)
+        from lfstream.bitstream import iter_packets
+
+        fh = io.BytesIO(data)
+        read_header(fh)
+        pk = next(iter_packets(fh, hdr))
+        add(name, lambda: dec.decode_packet(pk))
+    hevc = encode_views(lf, "hevc", 32, constant_qp=True)
+    add("HEVC decode (x265 QP32)", lambda: decode_views(hevc, "hevc", lf.shape[:2], lf.shape[2:4]))
+    add("focal stack SaS 16", lambda: focal_stack(lf))
+    if views == 7:
+        add("focal stack RefNet 16", lambda: focal_stack(lf, method="refnet", device=device))
+    return rows
+
+
+def end_to_end(views: int, size: tuple[int, int], frames: int, batch: int, depth_hint: bool, device: str) -> dict:
+    clip = list(synth_clip(frames, views, size, seed=9).lf)
+    cfg = StreamConfig(refocus="sas", metrics=False, save=(), batch=batch, depth_hint=depth_hint,
+                       depth="net" if batch > 1 else "auto", device=device)
+    s = Pipeline(iter(clip), cfg, None).run()
+    row = {"lf": f"{views}x{views}x{size[0]}x{size[1]}", "stage": "end to end", "frames": s["frames"], "fps": s["fps"],
+           "batch": batch, "depth_hint": depth_hint, "stages": s["stages"]}
+    print(f"end to end {row['lf']} hint={depth_hint} batch={batch}: {s['fps']:.2f} frames/s  "
+          + " ".join(f"{k} {v['ms_per_frame']:.0f}ms" for k, v in s["stages"].items()))
+    return row
+
+
+def pareto(runs: int, device: str) -> list[dict]:
+    sea = ROOT.parent / "shared" / "data" / "seahorse5x5" / "camImagesFlat"
+    if not sea.exists():
+        return []
+    lf = lfstream.read_lf(sea)
+    points = []
+    for label, hint_on, depth, hance in (("flat", False, "flat", "off"), ("flat + JPEG-Hance", False, "flat", "on"),
+                                         ("hint", True, "hint", "off"), ("hint + JPEG-Hance", True, "hint", "on"),
+                                         ("Depth-Net", True, "net", "off"), ("Depth-Net + JPEG-Hance", True, "net", "on")):
+        data = lfstream.encode(lf, depth_hint=hint_on)
+        rec = decode(data, depth=depth, hance=hance, device=device)[0]
+        t = timeit(lambda: decode(data, depth=depth, hance=hance, device=device), runs=runs)
+        points.append({"config": label, "decode_ms": t["median_s"] * 1e3, "mpsnr": capped(mpsnr(lf, rec)),
+                       "bpp": len(data) * 8 / float(np.prod(lf.shape[:4])), "default": label == "hint"})
+    for p in points:
+        p["pareto"] = not any(q["decode_ms"] <= p["decode_ms"] and q["mpsnr"] >= p["mpsnr"] and q is not p
+                              and (q["decode_ms"] < p["decode_ms"] or q["mpsnr"] > p["mpsnr"]) for q in points)
+        print(f"pareto seahorse {p['config']:24s} {p['decode_ms']:8.1f} ms  {p['mpsnr']:6.2f} dB  "
+              f"{'front' if p['pareto'] else ''}{' (default)' if p['default'] else ''}")
+    plot(points, ROOT / "bench" / "results" / "pareto_seahorse.png")
+    return points
+
+
+def plot(points: list[dict], path) -> None:
+    w, h, m = 800, 500, 70
+    img = np.full((h, w, 3), 255, np.uint8)
+    xs = np.log10([p["decode_ms"] for p in points])
+    ys = [p["mpsnr"] for p in points]
+    x0, x1, y0, y1 = xs.min() - 0.1, xs.max() + 0.1, min(ys) - 1, max(ys) + 1
+    cv2.rectangle(img, (m, m), (w - m, h - m), (0, 0, 0), 1)
+    cv2.putText(img, "seahorse: decoder MPSNR (dB) vs decode time (ms, log)", (m, 40), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1)
+    for p, x, y in zip(points, xs, ys):
+        px = int(m + (x - x0) / (x1 - x0) * (w - 2 * m))
+        py = int(h - m - (y - y0) / (y1 - y0) * (h - 2 * m))
+        colour = (0, 0, 220) if p["default"] else ((0, 150, 0) if p["pareto"] else (120, 120, 120))
+        cv2.circle(img, (px, py), 6, colour, -1, cv2.LINE_AA)
+        cv2.putText(img, f"{p['config']} {p['decode_ms']:.0f}ms", (px + 8, py - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.42, colour, 1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), img)
+
+
+def main(argv=None) -> dict:
+    p = parser(__doc__)
+    p.add_argument("--device", default="cpu")
+    args = p.parse_args(argv)
+    runs = 1 if args.quick else args.runs
+    sizes = [(7, (128, 160))] if args.quick else [(7, (375, 540)), (9, (512, 512)), (13, (256, 256)), (5, (1080, 1920))]
+    results = []
+    for views, size in sizes:
+        results += stage_rows(views, size, runs, args.device)
+    e2e_size = (128, 160) if args.quick else (375, 540)
+    frames = 4 if args.quick else 16
+    results.append(end_to_end(7, e2e_size, frames, 1, False, args.device))
+    results.append(end_to_end(7, e2e_size, frames, 1, True, args.device))
+    for b in ((1, 4) if not args.quick else (2,)):
+        results.append(end_to_end(7, e2e_size, frames, b if b > 1 else 2, True, args.device))
+    results += pareto(runs, args.device)
+    return emit(args, results)
+
+
+if __name__ == "__main__":
+    main()
