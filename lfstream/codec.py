@@ -204,40 +204,59 @@ class Decoder:
     def decode_packet(self, packet: Packet) -> DecodedFrame:
         return self.decode_batch([packet])[0]
 
-    def decode_batch(self, packets: list[Packet]) -> list[DecodedFrame]:
-        """Decodes several packets; the networks run once over the batch."""
-        if not packets:
-            return []
-        h, w = self.header.size
-        centres = np.stack([decode_jpeg(p.image, (h, w), p.seq) for p in packets])
+    @property
+    def estimates_depth(self) -> bool:
+        """Whether frames get a disparity of their own (hint or Depth-Net), not flat."""
+        return self.depth in ("hint", "net") or (self.depth == "auto" and self.header.has_hint)
+
+    def decode_centres(self, packets: list[Packet]) -> np.ndarray:
+        """JPEG decode and (where enabled) JPEG-Hance of the packets' centre views, batched.
+
+        Shape:
+            - output: ``(B, H, W, 3)`` uint8
+        """
+        centres = np.stack([decode_jpeg(p.image, self.header.size, p.seq) for p in packets])
         if self._hance is not None:
             from lfstream.restore import restore_images
 
             centres = restore_images(centres, self._hance, self.device)
+        return centres
+
+    def reconstruct(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray) -> DecodedFrame:
+        """Warps a decoded centre view by a given centre-view disparity (occlusion-aware) and
+        applies the packet's shading gains; also serves callers that reuse a disparity."""
+        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion)
+        return self._finish(packet, centre, disparity, lf)
+
+    def _finish(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray, lf: np.ndarray) -> DecodedFrame:
+        if packet.gain:
+            lf = apply_gains(lf, decode_gains(packet.gain, self.header.views, packet.seq))
+        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity)
+
+    def decode_batch(self, packets: list[Packet], centres: np.ndarray | None = None) -> list[DecodedFrame]:
+        """Decodes several packets; the networks run once over the batch. ``centres``: the
+        output of :meth:`decode_centres` for these packets, when the caller already has it."""
+        if not packets:
+            return []
+        h, w = self.header.size
+        if centres is None:
+            centres = self.decode_centres(packets)
         hints: list[np.ndarray | None] = []
         for p, centre in zip(packets, centres):
             use_hint = self.depth in ("hint", "net") or (self.depth == "auto" and p.hint)
             if use_hint and not p.hint:
                 raise BitstreamError("packet has no depth hint", p.seq)
             hints.append(decode_hint(p.hint, (h, w), guide=centre, frame=p.seq) if use_hint else None)
-        view_maps = None
-        if self._depth_net is not None:
-            from lfstream.depth_net import predict_view_disparities
+        if self._depth_net is None:
+            return [self.reconstruct(p, centre, hint if hint is not None else np.zeros((h, w), np.float32))
+                    for p, centre, hint in zip(packets, centres, hints)]
+        from lfstream.depth_net import predict_view_disparities
 
-            stacked = np.stack(hints) if self._depth_net.config.hint else None
-            view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device)
-        out = []
-        for k, (p, centre) in enumerate(zip(packets, centres)):
-            if view_maps is not None:
-                disparity = view_maps[k, self.header.views[0] // 2, self.header.views[1] // 2]
-                lf = warp_views_per_view(centre, view_maps[k])
-            else:
-                disparity = hints[k] if hints[k] is not None else np.zeros((h, w), np.float32)
-                lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion)
-            if p.gain:
-                lf = apply_gains(lf, decode_gains(p.gain, self.header.views, p.seq))
-            out.append(DecodedFrame(p.seq, p.timestamp_us, lf, centre, disparity))
-        return out
+        stacked = np.stack(hints) if self._depth_net.config.hint else None
+        view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device)
+        u0, v0 = self.header.views[0] // 2, self.header.views[1] // 2
+        return [self._finish(p, centre, maps[u0, v0], warp_views_per_view(centre, maps))
+                for p, centre, maps in zip(packets, centres, view_maps)]
 
 
 # ----------------------------------------------------------------------------------------

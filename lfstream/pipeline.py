@@ -35,7 +35,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import cv2
 import numpy as np
@@ -44,12 +44,13 @@ from lfstream.bitstream import Packet
 from lfstream.codec import Decoder, DecodedFrame, Encoder, check_device
 from lfstream.errors import LFFileError, LFStreamError, LFValueError
 from lfstream.optics import SEED_ALPHAS, slopes_from_alphas
+from lfstream.transport import get_until_stopped, put_until_stopped
 
 REFOCUS_MODES = ("auto", "refnet", "sas", "fourier", "none")
 TRANSPORTS = ("inproc", "file", "tcp")
 SAVE_KINDS = ("mp4", "png", "sweep", "lf")
 _POLL_S = 0.1
-_END = object()
+_SKIP = object()  # a stage's work result meaning "not counted as a frame"
 
 
 class PipelineError(LFStreamError):
@@ -227,10 +228,8 @@ class Refocuser:
         margin = self.config.plane_margin
         inside = (self.slopes >= lo - margin) & (self.slopes <= hi + margin)
         out = np.empty((len(self.slopes), *lf.shape[2:]), np.uint8)
-        t0 = time.perf_counter()
         if inside.any():
             out[inside] = focal_stack(lf, slopes=self.slopes[inside])
-        t_in = time.perf_counter() - t0
         cheap = np.flatnonzero(~inside).tolist()
         if cheap:
             h, w = lf.shape[2:4]
@@ -252,7 +251,6 @@ class Refocuser:
                 self._cheap_ratio = max(t_exact - t_cheap, 0.0) / len(cheap)
             self.cheap_planes += len(cheap)
             self.cheap_saved_s += (self._cheap_ratio or 0.0) * len(cheap)
-        del t_in
         return out, cheap
 
 
@@ -360,8 +358,11 @@ class Pipeline:
         self.static_skips = 0
         self.static_saved_s = 0.0
         self.static_error_db: float | None = None
+        self._static_full_s = 0.0  # a full decode's time, measured at the first skip
         self.refocuser: Refocuser | None = None
         self.interrupted = False
+        self.decoder: Decoder | None = None
+        self.sink: Sink | None = None
         self.queues: dict[str, queue.Queue] = {}
 
     # -- helpers ------------------------------------------------------------------------
@@ -373,21 +374,11 @@ class Pipeline:
         self.stop_event.set()
 
     def _put(self, q: queue.Queue, item) -> bool:
-        while not self.stop_event.is_set():
-            try:
-                q.put(item, timeout=_POLL_S)
-                return True
-            except queue.Full:
-                continue
-        return False
+        return put_until_stopped(q, item, self.stop_event)
 
     def _get(self, q: queue.Queue):
-        while not self.stop_event.is_set():
-            try:
-                return q.get(timeout=_POLL_S)
-            except queue.Empty:
-                continue
-        return _END
+        """The next item, or ``None`` at the end of the stream or on stop."""
+        return get_until_stopped(q, self.stop_event)
 
     def stop(self) -> None:
         self.interrupted = True
@@ -419,10 +410,10 @@ class Pipeline:
             self._put_end(q_out)
 
     def _put_end(self, q: queue.Queue) -> None:
-        # the end marker must get through even when the consumer is slow
+        # the end marker (None) must get through even when the consumer is slow
         while True:
             try:
-                q.put(_END, timeout=_POLL_S)
+                q.put(None, timeout=_POLL_S)
                 return
             except queue.Full:
                 if self.stop_event.is_set():
@@ -431,38 +422,57 @@ class Pipeline:
                     except queue.Empty:
                         pass
 
-    def _encoder(self, q_in: queue.Queue, channel) -> None:
-        st, seq = self.stats["encoder"], None
-        enc = Encoder(quality=self.config.quality, depth_hint=self.config.depth_hint)
-        started = False
+    def _consume(self, name: str, q_in: queue.Queue, work: Callable[[Any], Any],
+                 forward: Callable[[Any], bool] | None = None, close: Callable[[int | None], None] | None = None) -> None:
+        """The loop every consuming stage shares: takes items until the end marker or a stop,
+        times ``work`` (its result ``_SKIP`` means: not a frame of this stage), passes the
+        result to ``forward`` (False stops the stage), turns an exception into a
+        :class:`PipelineError` naming the stage and frame, and always runs ``close`` last."""
+        st, seq = self.stats[name], None
         try:
-            while True:
-                item = self._get(q_in)
-                if item is _END:
-                    break
-                seq, lf = item
+            while (item := self._get(q_in)) is not None:
+                seq = item[0] if isinstance(item, tuple) else item.seq
                 t0 = time.perf_counter()
-                if not started:
-                    channel.send_header(enc.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
-                    started = True
-                packet = enc.encode_frame(lf, seq, int(round(seq * 1e6 / self.config.fps)))
+                result = work(item)
+                if result is _SKIP:
+                    continue
                 st.busy_s += time.perf_counter() - t0
                 st.frames += 1
-                n_bytes = len(packet.image) + len(packet.hint) + len(packet.gain)
-                self.bytes += n_bytes
-                self._frame_bpp[seq] = n_bytes * 8 / float(np.prod(lf.shape[:4]))
-                self.pixels += int(np.prod(lf.shape[:4]))
-                if not channel.send(packet, self.stop_event):
+                if forward is not None and not forward(result):
                     break
         except Exception as exc:
-            self._fail("encoder", seq, exc)
+            self._fail(name, seq, exc)
         finally:
+            if close is not None:
+                close(seq)
+
+    def _encoder(self, q_in: queue.Queue, channel) -> None:
+        enc = Encoder(quality=self.config.quality, depth_hint=self.config.depth_hint)
+        started = False
+
+        def encode(item: tuple[int, np.ndarray]) -> Packet:
+            nonlocal started
+            seq, lf = item
+            if not started:
+                channel.send_header(enc.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
+                started = True
+            packet = enc.encode_frame(lf, seq, int(round(seq * 1e6 / self.config.fps)))
+            pixels = int(np.prod(lf.shape[:4]))
+            n_bytes = len(packet.image) + len(packet.hint) + len(packet.gain)
+            self.bytes += n_bytes
+            self.pixels += pixels
+            self._frame_bpp[seq] = n_bytes * 8 / float(pixels)
+            return packet
+
+        def close(seq: int | None) -> None:
             try:
                 if not started and self.receiver is None and self.sender is None and not self.stop_event.is_set():
                     self._fail("encoder", None, LFValueError("the source gave no frames"))
                 channel.close(self.stop_event)
             except Exception as exc:
                 self._fail("transport", seq, exc)
+
+        self._consume("encoder", q_in, encode, lambda packet: channel.send(packet, self.stop_event), close)
 
     def _decoder(self, channel, q_out: queue.Queue) -> None:
         st, seq = self.stats["decoder"], None
@@ -499,28 +509,14 @@ class Pipeline:
     def _decode_with_static_skip(self, dec: Decoder, packets: list[Packet], prev: DecodedFrame | None) -> list[DecodedFrame]:
         """Skip (a): reuse the previous disparity for a near-static centre view."""
         cfg = self.config
-        uses_depth = dec.depth in ("hint", "net") or (dec.depth == "auto" and dec.header.has_hint)
-        if not (cfg.skip_static and uses_depth and prev is not None and len(packets) == 1):
+        if not (cfg.skip_static and dec.estimates_depth and prev is not None and len(packets) == 1):
             return dec.decode_batch(packets)
-        from lfstream.codec import decode_jpeg
-
-        p = packets[0]
         t0 = time.perf_counter()
-        centre = decode_jpeg(p.image, dec.header.size, p.seq)
-        if dec.uses_hance:
-            from lfstream.restore import restore_images
-
-            centre = restore_images(centre[None], dec._hance, dec.device)[0]
-        change = float(cv2.absdiff(centre, prev.centre).mean())
-        if change >= cfg.static_threshold:
-            return dec.decode_batch(packets)
-        from lfstream.shading import apply_gains, decode_gains
-        from lfstream.warp import warp_views
-
-        lf = warp_views(centre, prev.disparity, dec.header.views, occlusion=dec.occlusion)
-        if p.gain:
-            lf = apply_gains(lf, decode_gains(p.gain, dec.header.views, p.seq))
-        skipped = DecodedFrame(p.seq, p.timestamp_us, lf, centre, prev.disparity)
+        centres = dec.decode_centres(packets)
+        t_centres = time.perf_counter() - t0
+        if float(cv2.absdiff(centres[0], prev.centre).mean()) >= cfg.static_threshold:
+            return dec.decode_batch(packets, centres)
+        skipped = dec.reconstruct(packets[0], centres[0], prev.disparity)
         t_skip = time.perf_counter() - t0
         self.static_skips += 1
         if self.static_error_db is None:
@@ -528,58 +524,33 @@ class Pipeline:
             from lfstream.metrics import mpsnr
 
             t0 = time.perf_counter()
-            full = dec.decode_batch(packets)[0]
-            t_full = time.perf_counter() - t0
-            self._static_full_s = t_full
-            err = float(np.minimum(mpsnr(full.lf, skipped.lf), 100.0))
-            self.static_error_db = err
-        self.static_saved_s += max(getattr(self, "_static_full_s", t_skip) - t_skip, 0.0)
+            full = dec.decode_batch(packets, centres)[0]
+            self._static_full_s = t_centres + time.perf_counter() - t0
+            self.static_error_db = float(np.minimum(mpsnr(full.lf, skipped.lf), 100.0))
+        self.static_saved_s += max(self._static_full_s - t_skip, 0.0)
         return [skipped]
 
     def _refocus(self, q_in: queue.Queue, q_out: queue.Queue) -> None:
-        st, seq = self.stats["refocus"], None
-        try:
-            while True:
-                f = self._get(q_in)
-                if f is _END:
-                    break
-                seq = f.seq
-                t0 = time.perf_counter()
-                if self.refocuser is None:
-                    self.refocuser = Refocuser(self.config, tuple(f.lf.shape[:2]))
-                    self.refocuser.choose(f.lf)
-                stack, cheap = self.refocuser.render(f)
-                st.busy_s += time.perf_counter() - t0
-                st.frames += 1
-                if not self._put(q_out, Frame(f.seq, f, stack, cheap)):
-                    break
-        except Exception as exc:
-            self._fail("refocus", seq, exc)
-        finally:
-            self._put_end(q_out)
+        def render(f: DecodedFrame) -> Frame:
+            if self.refocuser is None:
+                self.refocuser = Refocuser(self.config, tuple(f.lf.shape[:2]))
+                self.refocuser.choose(f.lf)
+            stack, cheap = self.refocuser.render(f)
+            return Frame(f.seq, f, stack, cheap)
+
+        self._consume("refocus", q_in, render, lambda frame: self._put(q_out, frame), lambda _: self._put_end(q_out))
 
     def _sink(self, q_in: queue.Queue, q_metrics: queue.Queue | None) -> None:
-        st, seq = self.stats["sink"], None
-        sink = Sink(self.out, self.config) if self.out is not None else None
-        self.sink = sink
-        try:
-            while True:
-                f = self._get(q_in)
-                if f is _END:
-                    break
-                seq = f.seq
-                t0 = time.perf_counter()
-                if sink is not None:
-                    sink.write(f)
-                if self.config.sink_delay_s:
-                    time.sleep(self.config.sink_delay_s)
-                st.busy_s += time.perf_counter() - t0
-                st.frames += 1
-                if q_metrics is not None and not self._put(q_metrics, f):
-                    break
-        except Exception as exc:
-            self._fail("sink", seq, exc)
-        finally:
+        sink = self.sink = Sink(self.out, self.config) if self.out is not None else None
+
+        def write(f: Frame) -> Frame:
+            if sink is not None:
+                sink.write(f)
+            if self.config.sink_delay_s:
+                time.sleep(self.config.sink_delay_s)
+            return f
+
+        def close(seq: int | None) -> None:
             if sink is not None:
                 try:
                     sink.close()
@@ -588,79 +559,61 @@ class Pipeline:
             if q_metrics is not None:
                 self._put_end(q_metrics)
 
+        forward = (lambda f: self._put(q_metrics, f)) if q_metrics is not None else None
+        self._consume("sink", q_in, write, forward, close)
+
     def _metrics(self, q_in: queue.Queue) -> None:
-        from lfstream.metrics import mpsnr, mssim
+        from lfstream.metrics import mpsnr, mssim, psnr
+        from lfstream.refocus import focal_stack
 
-        st, seq = self.stats["metrics"], None
-        try:
-            while True:
-                f = self._get(q_in)
-                if f is _END:
-                    break
-                seq = f.seq
-                with self._orig_lock:
-                    ref = self._originals.pop(f.seq, None)
-                    # frames the transport lost never reach this stage: drop their originals
-                    for k in [k for k in self._originals if k < f.seq]:
-                        del self._originals[k]
-                if ref is None:
-                    continue
-                t0 = time.perf_counter()
-                rec = f.decoded.lf
-                self._psnr.append((f.seq, float(np.minimum(mpsnr(ref, rec), 100.0))))
-                every = self.config.mssim_every
-                if every and f.seq % every == 0 and min(ref.shape[2:4]) >= 11:
-                    self._ssim.append((f.seq, float(mssim(ref, rec))))
-                    if f.stack is not None:
-                        # the focal stack against SaS of the input LF at the same alphas
-                        from lfstream.metrics import psnr
-                        from lfstream.refocus import focal_stack
+        def measure(f: Frame):
+            with self._orig_lock:
+                ref = self._originals.pop(f.seq, None)
+                # frames the transport lost never reach this stage: drop their originals
+                for k in [k for k in self._originals if k < f.seq]:
+                    del self._originals[k]
+            if ref is None:
+                return _SKIP
+            rec = f.decoded.lf
+            self._psnr.append((f.seq, float(np.minimum(mpsnr(ref, rec), 100.0))))
+            every = self.config.mssim_every
+            if every and f.seq % every == 0 and min(ref.shape[2:4]) >= 11:
+                self._ssim.append((f.seq, float(mssim(ref, rec))))
+                if f.stack is not None:
+                    # the focal stack against SaS of the input LF at the same alphas
+                    truth = focal_stack(ref, self.config.alphas)
+                    self._stack_psnr[f.seq] = float(np.mean(np.minimum(psnr(truth, f.stack), 100.0)))
+            return f
 
-                        truth = focal_stack(ref, self.config.alphas)
-                        self._stack_psnr[f.seq] = float(np.mean(np.minimum(psnr(truth, f.stack), 100.0)))
-                st.busy_s += time.perf_counter() - t0
-                st.frames += 1
-        except Exception as exc:
-            self._fail("metrics", seq, exc)
+        self._consume("metrics", q_in, measure)
 
     # -- run ----------------------------------------------------------------------------
     def run(self) -> dict:
-        from lfstream.transport import FileChannel, InprocChannel
+        from lfstream.transport import FileChannel, InprocChannel, TcpReceiver
 
         cfg = self.config
         qs = cfg.queue_size
         t_start = time.perf_counter()
         threads: list[threading.Thread] = []
+        send_channel = recv_channel = None
         if self.receiver is not None:
-            channel = self.receiver
+            recv_channel = self.receiver
         elif self.sender is not None:
-            channel = self.sender
+            send_channel = self.sender
         elif cfg.transport == "file":
-            channel = FileChannel(self.stream_file)
+            send_channel = recv_channel = FileChannel(self.stream_file)
         elif cfg.transport == "tcp":
-            from lfstream.transport import TcpReceiver, TcpSender
-
-            self.receiver = TcpReceiver("127.0.0.1", 0)
-            host, port = self.receiver.address
-            self._loopback = (host, port)
-            channel = None
+            # loopback TCP: the sender connects when the encoder sends the stream header
+            recv_channel = self.receiver = TcpReceiver("127.0.0.1", 0)
+            send_channel = _LazyTcpSender(*self.receiver.address)
         else:
-            channel = InprocChannel(qs)
+            send_channel = recv_channel = InprocChannel(qs)
         self.queues = {"encode": queue.Queue(qs), "refocus": queue.Queue(qs), "sink": queue.Queue(qs),
                        "metrics": queue.Queue(qs)}
         if self.source is not None:
             threads.append(threading.Thread(target=self._producer, args=(self.queues["encode"],), name="producer"))
-            if channel is None:  # loopback TCP: the sender connects when the encoder starts
-                from lfstream.transport import TcpSender
-
-                send_channel = _LazyTcpSender(*self._loopback)
-                recv_channel = self.receiver
-            else:
-                send_channel = recv_channel = channel
             threads.append(threading.Thread(target=self._encoder, args=(self.queues["encode"], send_channel),
                                             name="encoder"))
-        else:
-            recv_channel = channel
         if self.sender is None:
             want_metrics = cfg.metrics and self.source is not None
             threads += [
@@ -690,7 +643,7 @@ class Pipeline:
         wall = time.perf_counter() - t_start
         if self.error is not None:
             raise self.error
-        return self.summary(wall, recv_channel if self.sender is None else None)
+        return self.summary(wall, recv_channel)
 
     def status_line(self, elapsed: float) -> str:
         parts = [f"{elapsed:6.1f} s"]
@@ -728,10 +681,10 @@ class Pipeline:
                                         "saved_s": round(self.refocuser.cheap_saved_s, 4) if self.refocuser else 0.0,
                                         "error_psnr_db_vs_exact": self.refocuser.cheap_error_db if self.refocuser else None},
                 "jpeg_hance": {"mode": self.config.hance,
-                               "ran": bool(getattr(self, "decoder", None) and self.decoder.uses_hance)},
+                               "ran": bool(self.decoder is not None and self.decoder.uses_hance)},
             },
             "interrupted": self.interrupted,
-            "outputs": (self.sink.files if getattr(self, "sink", None) is not None else []),
+            "outputs": self.sink.files if self.sink is not None else [],
         }
         ssim_of = dict(self._ssim)
         for row in out["per_frame"]:

@@ -106,10 +106,10 @@ class InprocChannel:
         self._header_ready.set()
 
     def send(self, packet: Packet, stop: threading.Event | None = None) -> bool:
-        return _put(self._q, packet, stop)
+        return put_until_stopped(self._q, packet, stop)
 
     def close(self, stop: threading.Event | None = None) -> None:
-        _put(self._q, None, stop)
+        put_until_stopped(self._q, None, stop)
 
     # receiver side
     def header(self, stop: threading.Event | None = None) -> StreamHeader:
@@ -122,7 +122,7 @@ class InprocChannel:
     def packets(self, stop: threading.Event | None = None) -> Iterator[Packet]:
         seqf = SequenceFilter(self.stats)
         while True:
-            item = _get(self._q, stop)
+            item = get_until_stopped(self._q, stop)
             if item is None:
                 return
             self.stats.received += 1
@@ -133,8 +133,9 @@ class InprocChannel:
         return self._q.qsize()
 
 
-def _put(q: queue.Queue, item, stop: threading.Event | None) -> bool:
-    """Blocking put that gives up when ``stop`` is set (so Ctrl-C never hangs on a full queue)."""
+def put_until_stopped(q: queue.Queue, item, stop: threading.Event | None) -> bool:
+    """Blocking put that gives up (returns False) when ``stop`` is set, so Ctrl-C never
+    hangs on a full queue. Shared by the transports and the pipeline's stages."""
     while True:
         try:
             q.put(item, timeout=_POLL_S)
@@ -144,7 +145,8 @@ def _put(q: queue.Queue, item, stop: threading.Event | None) -> bool:
                 return False
 
 
-def _get(q: queue.Queue, stop: threading.Event | None):
+def get_until_stopped(q: queue.Queue, stop: threading.Event | None):
+    """Blocking get that returns ``None`` (the end marker) when ``stop`` is set."""
     while True:
         try:
             return q.get(timeout=_POLL_S)
@@ -404,4 +406,4 @@ class TcpReceiver:
 
 
 __all__ = ["InprocChannel", "FileChannel", "TcpSender", "TcpReceiver", "ReceiveStats", "SequenceFilter",
-           "TransportError", "parse_address", "TAG_HEADER", "TAG_PACKET", "TAG_END"]
+           "TransportError", "parse_address", "put_until_stopped", "get_until_stopped", "TAG_HEADER", "TAG_PACKET", "TAG_END"]
