@@ -20,9 +20,10 @@ import torch
 from _harness import ROOT, emit, parser, timeit
 
 import lfstream
-from lfstream.codec import decode_jpeg, encode_jpeg
+from lfstream.codec import jpeg_roundtrip as jpeg
 from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_disparity
 from lfstream.depth_net import predict_view_disparities
+from lfstream.lightfield import to_network_input
 from lfstream.metrics import capped, mpsnr, mssim, psnr, ssim
 from lfstream.refocus import focal_stack
 from lfstream.restore import restore_images
@@ -31,10 +32,6 @@ from lfstream.warp import warp_views, warp_views_per_view
 from lfstream.weights import load_model, manifest_entry
 
 SHARED = ROOT.parent / "shared" / "data"
-
-
-def jpeg(img: np.ndarray, q: int) -> np.ndarray:
-    return decode_jpeg(encode_jpeg(img, q), img.shape[:2])
 
 
 def real_lfs() -> list[tuple[str, np.ndarray, np.ndarray | None]]:
@@ -124,7 +121,7 @@ def bench_refnet(device: str, runs: int, quick: bool) -> list[dict]:
     net = load_model("refnet", "fast", device)
     for name, lf, _ in synthetic_lfs(2 if quick else 6, (128, 128), seed=9000):
         ref = focal_stack(lf)
-        x = torch.from_numpy(lf).to(device).permute(0, 1, 4, 2, 3).float().div(255)[None]
+        x = to_network_input(lf, device)[None]
         with torch.inference_mode():
             out = (net(x)[0].permute(0, 2, 3, 1).mul(255).add(0.5).clamp(0, 255).byte().cpu().numpy())
         rows.append({"model": "refnet", "lf": name, "psnr_vs_sas": capped(float(np.mean(psnr(ref, out)))),
@@ -132,7 +129,7 @@ def bench_refnet(device: str, runs: int, quick: bool) -> list[dict]:
         print(f"RefNet {name:18s} vs SaS: {rows[-1]['psnr_vs_sas']:.2f} dB / {rows[-1]['ssim_vs_sas']:.4f}")
     size = (128, 160) if quick else (375, 540)
     lf = synth_clip(1, 7, size, seed=1).lf[0]
-    x = torch.from_numpy(lf).to(device).permute(0, 1, 4, 2, 3).float().div(255)[None]
+    x = to_network_input(lf, device)[None]
 
     def refnet():
         with torch.inference_mode():

@@ -66,6 +66,11 @@ def decode_jpeg(data: bytes, size: tuple[int, int], frame: int | None = None) ->
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
 
 
+def jpeg_roundtrip(img: np.ndarray, quality: int) -> np.ndarray:
+    """What the decoder sees of a uint8 RGB image sent at ``quality`` (training and benchmarks)."""
+    return decode_jpeg(encode_jpeg(img, quality), img.shape[:2])
+
+
 @dataclass
 class Encoder:
     """Encodes LF frames into packets.
@@ -408,4 +413,5 @@ __all__ = [
     "encode_file",
     "encode_jpeg",
     "decode_jpeg",
+    "jpeg_roundtrip",
 ]

@@ -19,6 +19,7 @@ Output convention: ``d[u, v]`` is the disparity of view ``(u, v)`` in pixels per
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,7 @@ from torch import nn
 
 from lfstream._layers import Bottleneck, count_params
 from lfstream.errors import LFShapeError, LFValueError
+from lfstream.lightfield import to_network_input
 
 
 @dataclass(frozen=True)
@@ -94,9 +96,8 @@ class DepthNet(nn.Module):
         # up-samplers: from the deepest level back to the stem's resolution (stride 2), and
         # one more to full resolution only when out_stride == 1
         levels = len(config.stages)
-        stop = {1: -1, 2: 0}.get(config.out_stride, None)
-        if stop is None:  # out_stride 4, 8, ...: stop at stage (log2(out_stride) - 1)
-            stop = int(round(torch.log2(torch.tensor(float(config.out_stride))).item())) - 1
+        # the up-samplers end at level log2(out_stride) - 1 (-1: full resolution, 0: the stem's)
+        stop = int(round(math.log2(config.out_stride))) - 1
         self.up = nn.ModuleList()
         self.skip_index: list[int] = []
         for level in range(levels - 1, stop - 1, -1):
@@ -175,7 +176,7 @@ def predict_view_disparities(centres: np.ndarray, model: DepthNet, views: tuple[
     """
     if centres.ndim != 4 or centres.shape[-1] != 3:
         raise LFShapeError(f"centres: expected (B, H, W, 3), got {tuple(centres.shape)}")
-    x = torch.from_numpy(np.ascontiguousarray(centres)).to(device).permute(0, 3, 1, 2).float().div_(255.0)
+    x = to_network_input(centres, device)
     h = None
     if model.config.hint:
         if hints is None:

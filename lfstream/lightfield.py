@@ -293,6 +293,18 @@ def as_float(x: ArrayT) -> ArrayT:
     raise LFValueError(f"expected uint8 or float data, got {x.dtype}")
 
 
+def to_network_input(x: np.ndarray | torch.Tensor, device: str | torch.device = "cpu") -> torch.Tensor:
+    """Images or light fields with channels last (lfstream's boundary layout) to the
+    channels-before-(H, W) float32 tensor the networks take: uint8 is scaled to ``[0, 1]``.
+
+    Shape:
+        - x: ``(..., H, W, C)``; output: ``(..., C, H, W)``
+    """
+    t = x if isinstance(x, torch.Tensor) else torch.from_numpy(np.ascontiguousarray(x))
+    t = t.to(device).movedim(-1, -3)
+    return t.float().div_(255.0) if t.dtype == torch.uint8 else t.float()
+
+
 def to_uint8(x: ArrayT) -> ArrayT:
     """Float in ``[0, 1]`` -> uint8 with rounding and clipping; NaN maps to 0."""
     if isinstance(x, torch.Tensor):
@@ -319,6 +331,7 @@ def check_finite(x: ArrayT, name: str = "lf") -> None:
 
 
 __all__ = [
+    "to_network_input",
     "MAX_VIEWS_PER_AXIS",
     "MAX_VIEW_SIDE",
     "check_lf",

@@ -21,6 +21,7 @@ term is the weighted mean).
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Sequence
 
@@ -29,7 +30,7 @@ import torch
 import torch.nn.functional as F
 
 from lfstream.errors import LFShapeError, LFValueError
-from lfstream.lightfield import aperture_weights, check_finite, check_lf
+from lfstream.lightfield import aperture_weights, check_finite, check_lf, to_network_input
 from lfstream.optics import SEED_ALPHAS, alpha_from_slope, slopes_from_alphas
 
 METHODS = ("sas", "fourier", "refnet")
@@ -363,30 +364,35 @@ def focal_stack(
     return _to_input_range(out, lf)
 
 
+@functools.lru_cache(maxsize=4)
+def _shipped_refnet(preset: str, device: str):
+    """The shipped RefNet, loaded (and its SHA-256 checked) once per preset and device: the
+    pipeline renders a stack per frame. Used in eval mode only; callers must not mutate it."""
+    from lfstream.weights import load_model
+
+    return load_model("refnet", preset, device)
+
+
 def refnet_stack(lf, slopes: np.ndarray, device: str | None = None, preset: str = "fast"):
     """Focal stack by the shipped RefNet (see :mod:`lfstream.refnet`), float in ``[0, 1]``.
 
     Shape:
         - lf: ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``; output ``(16, H, W, 3)`` or ``(T, 16, H, W, 3)``
     """
-    from lfstream.weights import load_model
-
     seed = slopes_from_alphas(SEED_ALPHAS)
     if np.shape(slopes) != np.shape(seed) or not np.allclose(slopes, seed, atol=1e-6):
         raise LFValueError("method='refnet' renders the seed's sixteen alphas (0.125 ... 2.0) only")
     is_torch = isinstance(lf, torch.Tensor)
     dev = device or (str(lf.device) if is_torch else "cpu")
-    model = load_model("refnet", preset, dev)
+    model = _shipped_refnet(preset, str(dev))
     if lf.shape[-1] != 3 or tuple(lf.shape[-5:-3]) != tuple(model.config.views):
         raise LFValueError(f"method='refnet': the shipped RefNet takes {model.config.views[0]}x{model.config.views[1]} "
                            f"RGB views, got {tuple(lf.shape[-5:-3])} with {lf.shape[-1]} channels (train one with "
                            "tools/train.py, or use 'sas')")
-    x = lf if is_torch else torch.from_numpy(np.ascontiguousarray(lf))
-    x = x.to(dev)
-    x = x.float().div_(255.0) if x.dtype == torch.uint8 else x.float()
+    x = to_network_input(lf, dev)
     video = x if x.ndim == 6 else x[None]
     with torch.inference_mode():
-        out = model(video.permute(0, 1, 2, 5, 3, 4)).permute(0, 1, 3, 4, 2)
+        out = model(video).permute(0, 1, 3, 4, 2)
     out = out if x.ndim == 6 else out[0]
     return out if is_torch else out.cpu().numpy()
 

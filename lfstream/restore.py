@@ -22,6 +22,7 @@ from torch import nn
 
 from lfstream._layers import Bottleneck, count_params
 from lfstream.errors import LFShapeError
+from lfstream.lightfield import to_network_input
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,7 @@ def restore_images(images: np.ndarray, model: JPEGHance, device: str | torch.dev
     """
     if images.ndim != 4 or images.shape[-1] != 3 or images.dtype != np.uint8:
         raise LFShapeError(f"images: expected (B, H, W, 3) uint8, got {images.dtype} {tuple(images.shape)}")
-    x = torch.from_numpy(np.ascontiguousarray(images)).to(device).permute(0, 3, 1, 2).float().div_(255.0)
+    x = to_network_input(images, device)
     y = model(x).mul_(255.0).add_(0.5).clamp_(0, 255).to(torch.uint8)
     return np.ascontiguousarray(y.permute(0, 2, 3, 1).cpu().numpy())
 

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from conftest import shared
-from lfstream.codec import decode_jpeg, encode_jpeg
+from lfstream.codec import jpeg_roundtrip
 from lfstream.depth_net import DepthNet, build_depth_net, grid_disparities, predict_view_disparities
 from lfstream.errors import LFShapeError, LFValueError, WeightsError
 from lfstream.losses import depth_net_loss, psi, refnet_loss, ssim_torch, warp_per_view
@@ -176,7 +176,7 @@ def test_shipped_depth_net_beats_flat_on_a_real_light_field():
     from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_disparity
 
     lf = lfstream.read_lf(shared("seahorse5x5", "camImagesFlat"))[:, :, 150:278, 150:310]
-    centre = decode_jpeg(encode_jpeg(lf[2, 2], 50), lf.shape[2:4])
+    centre = jpeg_roundtrip(lf[2, 2], 50)
     hint = decode_hint(encode_hint(estimate_disparity(lf)), centre.shape[:2], guide=centre)
     maps = predict_view_disparities(centre[None], load_model("depth_net"), (5, 5), hint[None])[0]
     net = mpsnr(lf, warp_views_per_view(centre, maps))
@@ -188,7 +188,7 @@ def test_shipped_hance_improves_low_quality_jpeg():
     import lfstream
 
     view = lfstream.read_lf(shared("seahorse5x5", "camImagesFlat"))[2, 2, 100:356, 100:356]
-    dec = decode_jpeg(encode_jpeg(view, 10), view.shape[:2])
+    dec = jpeg_roundtrip(view, 10)
     out = restore_images(dec[None], load_model("jpeg_hance"))[0]
     assert psnr(view, out) > psnr(view, dec) + 0.1  # measured +0.43 dB on the full view at q10
 

@@ -31,7 +31,6 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 
@@ -39,6 +38,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from lfstream.codec import jpeg_roundtrip  # noqa: E402
+from lfstream.lightfield import to_network_input  # noqa: E402
 from lfstream.losses import depth_net_loss, hance_loss, refnet_loss  # noqa: E402
 from lfstream.weights import MODEL_NAMES, load_model, save_checkpoint, ship_weights, spec  # noqa: E402
 
@@ -102,12 +103,6 @@ def render_dataset(count: int, views: int, size: int, seed: int, workers: int) -
     return np.stack([o[0] for o in out]), np.stack([o[1] for o in out])
 
 
-def jpeg_roundtrip(img: np.ndarray, quality: int) -> np.ndarray:
-    """uint8 RGB through the codec's JPEG (same encoder as lfstream.codec)."""
-    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR), [int(cv2.IMWRITE_JPEG_QUALITY), quality])
-    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-
-
 def augment(batch: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Contrast, brightness and hue jitter (the seed's augmentations), per item, uint8 in/out.
 
@@ -131,8 +126,7 @@ def augment(batch: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 def _to_tensor(img: np.ndarray, device) -> torch.Tensor:
     """``(..., H, W, 3)`` uint8 to ``(..., 3, H, W)`` float32 in [0, 1]."""
-    t = torch.from_numpy(np.ascontiguousarray(img)).to(device)
-    return t.movedim(-1, -3).float().div_(255.0)
+    return to_network_input(img, device)
 
 
 # ---------------------------------------------------------------------------------------
