@@ -20,7 +20,7 @@ import numpy as np
 from _harness import ROOT, emit, parser, timeit
 
 import lfstream
-from lfstream.baseline import decode_views, encode_at_bpp, encode_views
+from lfstream.codec.baseline import decode_views, encode_at_bpp, encode_views
 from lfstream.errors import LFValueError
 from lfstream.metrics import bd_psnr, bd_rate, bpp, capped, dof_psnr, dof_ssim, mpsnr, mssim, psnr, ssim
 from lfstream.refocus import focal_stack

@@ -15,7 +15,7 @@ import time
 
 from _harness import emit, parser
 
-from lfstream.pipeline import Pipeline, StreamConfig
+from lfstream.stream import Pipeline, StreamConfig
 from lfstream.synth import synth_clip
 
 

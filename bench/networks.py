@@ -21,15 +21,15 @@ from _harness import ROOT, emit, parser, timeit
 
 import lfstream
 from lfstream.codec import jpeg_roundtrip as jpeg
-from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_disparity
-from lfstream.depth_net import predict_view_disparities
+from lfstream.codec.hint import HintOptions, decode_hint, encode_hint, estimate_disparity
+from lfstream.models.depth_net import predict_view_disparities
 from lfstream.lightfield import to_network_input
 from lfstream.metrics import capped, mpsnr, mssim, psnr, ssim
 from lfstream.refocus import focal_stack
-from lfstream.restore import restore_images
+from lfstream.models.jpeg_hance import restore_images
 from lfstream.synth import synth_clip
-from lfstream.warp import warp_views, warp_views_per_view
-from lfstream.weights import load_model, manifest_entry
+from lfstream.codec.warp import warp_views, warp_views_per_view
+from lfstream.models.registry import load_model, manifest_entry
 
 SHARED = ROOT.parent / "shared" / "data"
 

@@ -21,9 +21,9 @@ from _harness import ROOT, emit, parser, timeit
 
 import lfstream
 from lfstream.codec import Decoder, Encoder, decode
-from lfstream.bitstream import read_header
+from lfstream.codec.bitstream import read_header
 from lfstream.metrics import capped, mpsnr
-from lfstream.pipeline import Pipeline, StreamConfig
+from lfstream.stream import Pipeline, StreamConfig
 from lfstream.refocus import focal_stack
 from lfstream.synth import synth_clip
 
@@ -31,7 +31,7 @@ from lfstream.synth import synth_clip
 def stage_rows(views: int, size: tuple[int, int], runs: int, device: str) -> list[dict]:
     import io
 
-    from lfstream.baseline import decode_views, encode_views
+    from lfstream.codec.baseline import decode_views, encode_views
 
     lf = synth_clip(1, views, size, seed=3, motion=0, camera_pan=0).lf[0]
     label = f"{views}x{views}x{size[0]}x{size[1]}"
@@ -49,7 +49,7 @@ def stage_rows(views: int, size: tuple[int, int], runs: int, device: str) -> lis
     for name, data, depth in (("decode flat", flat, "flat"), ("decode hint", hint, "hint"), ("decode Depth-Net", hint, "net")):
         hdr = read_header(io.BytesIO(data))
         dec = Decoder(hdr, depth=depth, hance="off", device=device)
-        from lfstream.bitstream import iter_packets
+        from lfstream.codec.bitstream import iter_packets
 
         fh = io.BytesIO(data)
         read_header(fh)

@@ -3,6 +3,12 @@
 Conventions (see :mod:`lfstream.lightfield`): a frame is ``(U, V, H, W, 3)``, a video
 ``(T, U, V, H, W, 3)``; the centre view is ``(U // 2, V // 2)``; uint8 at the boundaries,
 float32 in ``[0, 1]`` inside; disparity follows the HCI benchmark's sign.
+
+The packages follow the data flow: :mod:`lfstream.io` (read and write light fields) ->
+:mod:`lfstream.codec` (encode, the ``.lfs`` bitstream, decode) -> :mod:`lfstream.refocus`
+(focal stacks) -> :mod:`lfstream.stream` (the pipeline and its transports), with
+:mod:`lfstream.models` (the networks) beside the decoder and refocusing, and
+:mod:`lfstream.cli` on top. ``import lfstream`` imports neither torch nor numba.
 """
 
 from lfstream.errors import (
@@ -15,13 +21,13 @@ from lfstream.errors import (
     LFValueError,
     WeightsError,
 )
-from lfstream.io import load_lf, read_lf, read_pfm, write_lf, write_pfm
+from lfstream.io import ReadOptions, load_lf, read_lf, read_pfm, write_lf, write_pfm
 
 __version__ = "0.1.0"
 
 
 def __getattr__(name: str):
-    # The codec pulls in PyAV and the decoder stages; import it only when asked for.
+    # The codec is imported only when asked for, so `import lfstream` stays light.
     if name in ("encode", "decode"):
         from lfstream import codec
 
@@ -39,6 +45,7 @@ __all__ = [
     "LFMissingViewsError",
     "BitstreamError",
     "WeightsError",
+    "ReadOptions",
     "read_lf",
     "load_lf",
     "write_lf",

@@ -17,14 +17,19 @@ because they are pure re-indexing or averaging operations.
 
 from __future__ import annotations
 
-from typing import TypeVar
+import sys
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
-import torch
 
 from lfstream.errors import LFShapeError, LFValueError
 
-ArrayT = TypeVar("ArrayT", np.ndarray, torch.Tensor)
+if TYPE_CHECKING:
+    import torch
+
+    ArrayT = TypeVar("ArrayT", np.ndarray, torch.Tensor)
+else:
+    ArrayT = TypeVar("ArrayT")
 
 #: Largest number of views per axis or pixels per side accepted anywhere, so that a
 #: corrupt header or a wrong argument fails early instead of allocating terabytes.
@@ -32,14 +37,21 @@ MAX_VIEWS_PER_AXIS = 64
 MAX_VIEW_SIDE = 16384
 
 
+def _is_tensor(x: object) -> bool:
+    # torch is imported only by the code that runs networks; an object can be a tensor only
+    # once torch has been imported, so this test never imports it (fast start-up).
+    torch = sys.modules.get("torch")
+    return torch is not None and isinstance(x, torch.Tensor)
+
+
 def _permute(x: ArrayT, axes: tuple[int, ...]) -> ArrayT:
-    if isinstance(x, torch.Tensor):
+    if _is_tensor(x):
         return x.permute(*axes)
     return np.transpose(x, axes)
 
 
 def _is_array(x: object) -> bool:
-    return isinstance(x, (np.ndarray, torch.Tensor))
+    return isinstance(x, np.ndarray) or _is_tensor(x)
 
 
 def check_lf(lf: object, name: str = "lf", allow_video: bool = True) -> tuple[int, ...]:
@@ -127,7 +139,7 @@ def downsample_angular(lf: ArrayT, factor: int = 2) -> ArrayT:
     x = lf[..., : nu * factor, : nv * factor, :, :, :]
     x = x.reshape(*lead, nu, factor, nv, factor, h, w, c)
     nl = len(lead)
-    if isinstance(x, torch.Tensor):
+    if _is_tensor(x):
         xf = x if x.is_floating_point() else x.float()
         if not x.is_floating_point():
             xf = xf / 255.0
@@ -258,13 +270,13 @@ def dof_image(lf: ArrayT, weights: np.ndarray | torch.Tensor | None = None) -> A
         - output: ``(*, H, W, C)``
     """
     u, v, *_ = lf_dims(lf)
-    is_torch = isinstance(lf, torch.Tensor)
+    is_torch = _is_tensor(lf)
     x = as_float(lf)
     if weights is None:
         if is_torch:
             return x.mean(dim=(-5, -4))
         return x.mean(axis=(-5, -4))
-    wt = weights if isinstance(weights, torch.Tensor) else torch.as_tensor(np.asarray(weights, np.float32))
+    wt = np.asarray(weights.detach().cpu() if _is_tensor(weights) else weights, np.float32)
     if tuple(wt.shape) != (u, v):
         raise LFShapeError(f"weights: expected shape ({u}, {v}), got {tuple(wt.shape)}")
     total = float(wt.sum())
@@ -272,16 +284,17 @@ def dof_image(lf: ArrayT, weights: np.ndarray | torch.Tensor | None = None) -> A
         raise LFValueError("weights: must be non-negative and sum to a positive finite value")
     wt = wt / total
     if is_torch:
-        wt = wt.to(device=x.device, dtype=x.dtype)
-        return torch.einsum("...uvhwc,uv->...hwc", x, wt)
-    return np.einsum("...uvhwc,uv->...hwc", x, wt.numpy().astype(x.dtype), optimize=True)
+        import torch
+
+        return torch.einsum("...uvhwc,uv->...hwc", x, torch.as_tensor(wt, device=x.device, dtype=x.dtype))
+    return np.einsum("...uvhwc,uv->...hwc", x, wt.astype(x.dtype), optimize=True)
 
 
 def as_float(x: ArrayT) -> ArrayT:
     """uint8 -> float32 in ``[0, 1]``; float inputs are returned as float32 (torch keeps its
     float dtype), other integer types are rejected."""
-    if isinstance(x, torch.Tensor):
-        if x.dtype == torch.uint8:
+    if _is_tensor(x):
+        if x.dtype == sys.modules["torch"].uint8:
             return x.float() / 255.0
         if x.is_floating_point():
             return x
@@ -300,6 +313,8 @@ def to_network_input(x: np.ndarray | torch.Tensor, device: str | torch.device = 
     Shape:
         - x: ``(..., H, W, C)``; output: ``(..., C, H, W)``
     """
+    import torch
+
     t = x if isinstance(x, torch.Tensor) else torch.from_numpy(np.ascontiguousarray(x))
     t = t.to(device).movedim(-1, -3)
     return t.float().div_(255.0) if t.dtype == torch.uint8 else t.float()
@@ -307,7 +322,8 @@ def to_network_input(x: np.ndarray | torch.Tensor, device: str | torch.device = 
 
 def to_uint8(x: ArrayT) -> ArrayT:
     """Float in ``[0, 1]`` -> uint8 with rounding and clipping; NaN maps to 0."""
-    if isinstance(x, torch.Tensor):
+    if _is_tensor(x):
+        torch = sys.modules["torch"]
         if x.dtype == torch.uint8:
             return x
         return torch.nan_to_num(x.float() * 255.0 + 0.5, nan=0.0).clamp_(0, 255).to(torch.uint8)
@@ -323,8 +339,8 @@ def check_finite(x: ArrayT, name: str = "lf") -> None:
     lfstream rejects non-finite input instead of sanitising it: a NaN in a light field is
     a bug upstream, and silently replacing it would hide that bug.
     """
-    if isinstance(x, torch.Tensor):
-        if x.is_floating_point() and not bool(torch.isfinite(x).all()):
+    if _is_tensor(x):
+        if x.is_floating_point() and not bool(sys.modules["torch"].isfinite(x).all()):
             raise LFValueError(f"{name}: contains NaN or Inf values")
     elif np.issubdtype(np.asarray(x).dtype, np.floating) and not np.isfinite(x).all():
         raise LFValueError(f"{name}: contains NaN or Inf values")

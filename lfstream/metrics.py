@@ -90,16 +90,40 @@ def psnr(x, y, data_range: float | None = None):
     return _out(out, is_torch)
 
 
-def _gaussian_window(device: torch.device, dtype: torch.dtype) -> torch.Tensor:
-    r = _SSIM_WIN // 2
-    g = torch.exp(-(torch.arange(-r, r + 1, dtype=torch.float64) ** 2) / (2 * _SSIM_SIGMA**2))
-    return (g / g.sum()).to(device=device, dtype=dtype)
+def _gaussian_1d(size: int = _SSIM_WIN) -> np.ndarray:
+    """The normalised 1-D Gaussian (sigma 1.5) whose outer product is the SSIM window."""
+    r = (size - 1) / 2
+    g = np.exp(-((np.arange(size) - r) ** 2) / (2 * _SSIM_SIGMA**2))
+    return g / g.sum()
 
 
-def _filter_valid(x: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
-    """Separable Gaussian filter of ``(N, 1, H, W)`` keeping only the valid region."""
-    x = F.conv2d(x, g.view(1, 1, -1, 1))
-    return F.conv2d(x, g.view(1, 1, 1, -1))
+def _ssim_from_moments(mu_a, mu_b, aa, bb, ab):
+    """Wang et al.'s SSIM map from the local moments (numpy arrays or torch tensors alike)."""
+    var_a = aa - mu_a * mu_a
+    var_b = bb - mu_b * mu_b
+    cov = ab - mu_a * mu_b
+    c1, c2 = _K1**2, _K2**2
+    return ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2))
+
+
+def ssim_nchw(a: torch.Tensor, b: torch.Tensor, data_range: float = 1.0, window: int = _SSIM_WIN) -> torch.Tensor:
+    """Differentiable SSIM of channel-first batches on any device, per image and channel.
+
+    The valid region only; ``window`` (odd) may be smaller than 11 for tiny training crops.
+
+    Shape:
+        - a, b: ``(N, C, H, W)`` with ``H, W >= window``
+        - output: ``(N, C)``
+    """
+    n, c, h, w = a.shape
+    g = torch.as_tensor(_gaussian_1d(window), device=a.device, dtype=a.dtype)
+    a, b = a / data_range, b / data_range
+    x = torch.cat([a, b, a * a, b * b, a * b], dim=1)
+    # separable Gaussian, one pass for all five moments of every channel
+    f = F.conv2d(x.reshape(-1, 1, h, w), g.view(1, 1, -1, 1))
+    f = F.conv2d(f, g.view(1, 1, 1, -1))
+    mu_a, mu_b, aa, bb, ab = f.reshape(n, 5, c, *f.shape[-2:]).unbind(1)
+    return _ssim_from_moments(mu_a, mu_b, aa, bb, ab).mean(dim=(-2, -1))
 
 
 def ssim_map_mean(tx: torch.Tensor, ty: torch.Tensor, rng: float) -> torch.Tensor:
@@ -108,21 +132,9 @@ def ssim_map_mean(tx: torch.Tensor, ty: torch.Tensor, rng: float) -> torch.Tenso
     if h < _SSIM_WIN or w < _SSIM_WIN:
         raise LFShapeError(f"ssim: images must be at least {_SSIM_WIN}x{_SSIM_WIN}, got {h}x{w}")
     lead = tx.shape[:-3]
-    # (..., H, W, C) -> (N*C, 1, H, W); channels are independent.
-    a = (tx / rng).reshape(-1, h, w, c).permute(0, 3, 1, 2).reshape(-1, 1, h, w)
-    b = (ty / rng).reshape(-1, h, w, c).permute(0, 3, 1, 2).reshape(-1, 1, h, w)
-    g = _gaussian_window(a.device, a.dtype)
-    stacked = torch.cat([a, b, a * a, b * b, a * b], dim=1)  # one conv pass for all moments
-    n = stacked.shape[0]
-    f = _filter_valid(stacked.reshape(n * 5, 1, h, w), g).reshape(n, 5, h - _SSIM_WIN + 1, w - _SSIM_WIN + 1)
-    mu_a, mu_b, aa, bb, ab = f.unbind(1)
-    var_a = aa - mu_a * mu_a
-    var_b = bb - mu_b * mu_b
-    cov = ab - mu_a * mu_b
-    c1, c2 = _K1**2, _K2**2
-    s = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2))
-    per_channel = s.mean(dim=(-2, -1)).reshape(-1, c)
-    return per_channel.mean(dim=-1).reshape(lead)
+    a = tx.reshape(-1, h, w, c).permute(0, 3, 1, 2)
+    b = ty.reshape(-1, h, w, c).permute(0, 3, 1, 2)
+    return ssim_nchw(a, b, rng).mean(dim=-1).reshape(lead)
 
 
 def ssim(x, y, data_range: float | None = None):
@@ -160,9 +172,8 @@ def _ssim_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
     h, w, c = x.shape[-3:]
     if h < _SSIM_WIN or w < _SSIM_WIN:
         raise LFShapeError(f"ssim: images must be at least {_SSIM_WIN}x{_SSIM_WIN}, got {h}x{w}")
-    g = _gaussian_window(torch.device("cpu"), torch.float64).numpy()
+    g = _gaussian_1d()
     r = _SSIM_WIN // 2
-    c1, c2 = _K1**2, _K2**2
     xs, ys = x.reshape(-1, h, w, c), y.reshape(-1, h, w, c)
     out = np.empty(len(xs), np.float64)
     for k in range(len(xs)):
@@ -176,11 +187,7 @@ def _ssim_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
                 f = f.reshape(h, w, -1)
                 return f[r:h - r, r:w - r]
 
-            mu_a, mu_b = blur(a), blur(b)
-            var_a = blur(a * a) - mu_a * mu_a
-            var_b = blur(b * b) - mu_b * mu_b
-            cov = blur(a * b) - mu_a * mu_b
-            s = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2))
+            s = _ssim_from_moments(blur(a), blur(b), blur(a * a), blur(b * b), blur(a * b))
             per_channel.extend(s.mean(axis=(0, 1)).tolist())
         out[k] = float(np.mean(per_channel))
     out = out.reshape(x.shape[:-3])

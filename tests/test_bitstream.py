@@ -7,7 +7,7 @@ import zlib
 import numpy as np
 import pytest
 
-from lfstream.bitstream import (
+from lfstream.codec.bitstream import (
     Limits,
     Packet,
     StreamHeader,

@@ -8,11 +8,12 @@ import torch
 
 import lfstream
 from lfstream.cli import main
-from lfstream.depth import decode_hint, disparity_errors, encode_hint, estimate_disparity
+from lfstream.codec.hint import decode_hint, disparity_errors, encode_hint, estimate_disparity
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.metrics import PSNR_CAP_DB, capped, mpsnr, mssim, psnr
 from lfstream.synth import fronto_parallel_plane, synth_clip
-from lfstream.warp import warp_views, warp_views_torch
+from lfstream.codec.warp import warp_views
+from lfstream.models.warp import warp_views_torch
 
 
 def mean_psnr(ref, test):
@@ -130,7 +131,7 @@ def test_cli_encode_decode_and_damaged_stream(tmp_path, capsys):
 
 
 def test_shading_gains_fix_vignetted_views():
-    from lfstream.shading import decode_gains, encode_gains, measure_gains, shading_present
+    from lfstream.codec.shading import decode_gains, encode_gains, measure_gains, shading_present
 
     vig = synth_clip(1, 5, (64, 96), seed=8, vignetting=0.6, motion=0, camera_pan=0).lf[0]
     clean = synth_clip(1, 5, (64, 96), seed=8, motion=0, camera_pan=0).lf[0]
@@ -142,14 +143,14 @@ def test_shading_gains_fix_vignetted_views():
     without = lfstream.decode(lfstream.encode(vig, quality=90, gain_grid=0))[0]
     assert mean_psnr(vig, with_gain) > mean_psnr(vig, without) + 2
     # a clean light field sends no gain maps
-    from lfstream.bitstream import split_stream
+    from lfstream.codec.bitstream import split_stream
 
     assert all(p.gain == b"" for p in split_stream(lfstream.encode(clean))[1])
     assert all(p.gain != b"" for p in split_stream(lfstream.encode(vig))[1])
 
 
 def test_baselines_round_trip_and_rate_search():
-    from lfstream.baseline import decode_views, encode_at_bpp, encode_views, view_order
+    from lfstream.codec.baseline import decode_views, encode_at_bpp, encode_views, view_order
 
     assert view_order(3, 3, "spiral")[0] == (1, 1) and sorted(view_order(3, 3, "spiral")) == view_order(3, 3)
     assert view_order(2, 3, "serpentine") == [(0, 0), (0, 1), (0, 2), (1, 2), (1, 1), (1, 0)]

@@ -13,13 +13,14 @@ import time
 import numpy as np
 import pytest
 
-from lfstream.bitstream import pack_packet
+from lfstream.codec.bitstream import pack_packet
 from lfstream.cli import main
 from lfstream.codec import Decoder, Encoder
 from lfstream.errors import LFStreamError
 from lfstream.io import iter_video_frames
-from lfstream.pipeline import Pipeline, PipelineError, StreamConfig, prepare_output, synthetic_source
-from lfstream.transport import TAG_END, TAG_HEADER, TAG_PACKET, TcpReceiver, TcpSender
+from lfstream.io._fs import prepare_output_dir
+from lfstream.stream import Pipeline, PipelineError, StreamConfig, synthetic_source
+from lfstream.stream.transport import TAG_END, TAG_HEADER, TAG_PACKET, TcpReceiver, TcpSender
 
 SMALL = dict(frames=4, views=5, size=(48, 64))
 
@@ -29,7 +30,7 @@ def small_source(frames=4, seed=3):
 
 
 def run(tmp_path, name, **cfg):
-    out = prepare_output(tmp_path / name)
+    out = prepare_output_dir(tmp_path / name)
     config = StreamConfig(refocus=cfg.pop("refocus", "sas"), mssim_every=1, **cfg)
     return Pipeline(small_source(), config, out, stream_file=out / "stream.lfs").run(), out
 
@@ -72,7 +73,7 @@ def test_tcp_faults_are_detected_and_skipped(tmp_path):
     # 0 ok, 1 lost, 2 duplicated, 3 corrupt, 5 before 4 (4 arrives late), 6, 7 ok
     plan = [payloads[0], payloads[2], payloads[2], bytes(corrupt), payloads[5], payloads[4], payloads[6], payloads[7]]
     receiver = TcpReceiver("127.0.0.1", 0, timeout_s=20)
-    out = prepare_output(tmp_path / "served")
+    out = prepare_output_dir(tmp_path / "served")
     result = {}
 
     def serve():
@@ -80,7 +81,7 @@ def test_tcp_faults_are_detected_and_skipped(tmp_path):
 
     t = threading.Thread(target=serve)
     t.start()
-    from lfstream.bitstream import pack_header
+    from lfstream.codec.bitstream import pack_header
 
     with socket.create_connection(receiver.address, timeout=10) as s:  # a faulty "proxy" sender
         s.sendall(struct.pack(">4sI", TAG_HEADER, len(pack_header(header))) + pack_header(header))
@@ -111,7 +112,7 @@ def test_stage_error_names_stage_and_frame_and_keeps_outputs(tmp_path):
                 f[0, 0, 0, 0, 0] = np.nan
             yield f
 
-    out = prepare_output(tmp_path / "err")
+    out = prepare_output_dir(tmp_path / "err")
     pipe = Pipeline(bad_source(), StreamConfig(refocus="sas", save=("mp4",)), out)
     with pytest.raises(PipelineError, match="stage encoder failed at frame 2") as info:
         pipe.run()
@@ -129,7 +130,7 @@ def _endless(frame):
 
 def test_stop_is_prompt_and_backpressure_bounds_the_producer(tmp_path):
     frame = next(iter(small_source(frames=1)))
-    out = prepare_output(tmp_path / "stop")
+    out = prepare_output_dir(tmp_path / "stop")
     pipe = Pipeline(_endless(frame), StreamConfig(refocus="sas", sink_delay_s=0.05, queue_size=2, metrics=False), out)
     threading.Timer(1.5, pipe.stop).start()
     t0 = time.perf_counter()

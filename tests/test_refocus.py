@@ -10,13 +10,13 @@ from lfstream.metrics import psnr
 from lfstream.optics import SEED_ALPHAS, alpha_from_slope, slope_from_alpha
 from lfstream.refocus import (
     FocalStack,
-    _sas_frame_torch,
     all_in_focus,
     focal_stack,
     fourier_slice,
     resolve_slopes,
     shift_and_sum,
 )
+from lfstream.refocus.shift_sum import _sas_frame_torch
 from lfstream.synth import fronto_parallel_plane
 from tests.conftest import random_lf, shared, shifted_views
 

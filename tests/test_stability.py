@@ -17,8 +17,8 @@ import lfstream
 from lfstream.errors import LFStreamError
 from lfstream.metrics import mpsnr, mssim, psnr, ssim
 from lfstream.refocus import focal_stack
-from lfstream.warp import warp_views
-from lfstream.weights import load_model
+from lfstream.codec.warp import warp_views
+from lfstream.models.registry import load_model
 
 FAST = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -129,7 +129,7 @@ def test_reduced_precision_inference_loses_at_most_0p1_db(dtype):
     p32 = float(np.mean(psnr(ref.astype(np.float64) / 255, f32.astype(np.float64), data_range=1.0)))
     plow = float(np.mean(psnr(ref.astype(np.float64) / 255, low.astype(np.float64), data_range=1.0)))
     # the rule: within 0.1 dB, or the stage stays float32 (bfloat16 measured 0.106 dB here)
-    from lfstream.refnet import INFERENCE_DTYPE
+    from lfstream.models.refnet import INFERENCE_DTYPE
 
     assert abs(p32 - plow) <= 0.1 or INFERENCE_DTYPE == torch.float32, (p32, plow)
     assert abs(p32 - plow) < 0.5, (p32, plow)  # and never far off

@@ -24,7 +24,7 @@ SHARED = ROOT.parent / "shared" / "data"
 
 def golden_cases() -> dict:
     """name -> list of frames (U, V, H, W, 3) uint8; the real case only where the samples exist."""
-    from lfstream.pipeline import synthetic_source
+    from lfstream.stream import synthetic_source
 
     cases = {"synthetic": list(synthetic_source(frames=4, views=7, size=(64, 96), seed=11))}
     sea = SHARED / "seahorse5x5" / "camImagesFlat"
@@ -39,7 +39,7 @@ def golden_cases() -> dict:
 
 
 def measure(frames: list[np.ndarray]) -> list[dict]:
-    from lfstream.pipeline import Pipeline, StreamConfig
+    from lfstream.stream import Pipeline, StreamConfig
 
     cfg = StreamConfig(refocus="sas", mssim_every=1, save=())
     summary = Pipeline(iter(frames), cfg, None).run()

@@ -40,8 +40,8 @@ if str(ROOT) not in sys.path:
 
 from lfstream.codec import jpeg_roundtrip  # noqa: E402
 from lfstream.lightfield import to_network_input  # noqa: E402
-from lfstream.losses import depth_net_loss, hance_loss, refnet_loss  # noqa: E402
-from lfstream.weights import MODEL_NAMES, load_model, save_checkpoint, ship_weights, spec  # noqa: E402
+from lfstream.models.losses import depth_net_loss, hance_loss, refnet_loss  # noqa: E402
+from lfstream.models.registry import MODEL_NAMES, load_model, save_checkpoint, ship_weights, spec  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data"
 
@@ -75,7 +75,7 @@ DEFAULT_CROP = {"jpeg_hance": 64, "depth_net": 96, "refnet": 128}
 
 def _render_sample(args: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
     """One synthetic LF and the depth hint the codec would send for it (encoded, decoded)."""
-    from lfstream.depth import HintOptions, decode_hint, encode_hint, estimate_disparity
+    from lfstream.codec.hint import HintOptions, decode_hint, encode_hint, estimate_disparity
     from lfstream.synth import SynthConfig, render_clip
 
     seed, views, size = args
@@ -177,7 +177,7 @@ def validate_hance(model, val_views: np.ndarray, quality: int, device) -> dict:
 @torch.no_grad()
 def validate_depth(model, hance, val_lf: np.ndarray, val_hints: np.ndarray, quality: int, device) -> dict:
     model.eval()
-    from lfstream.losses import warp_per_view
+    from lfstream.models.warp import warp_per_view
 
     net_p, flat_p, hint_p = [], [], []
     for lf, hint in zip(val_lf, val_hints):

@@ -7,8 +7,9 @@ stream). The receiver checks every length against :class:`Limits` before reading
 payload, every packet's CRC, and the sequence numbers: a lost, duplicated, reordered or
 corrupt packet is counted and skipped, never decoded.
 
-Shape of the receiver API: :meth:`Receiver.header` then iteration over :class:`Packet`
-in sequence order; :attr:`Receiver.stats` counts what was lost.
+Two protocols: a :class:`Sender` (``send_header``, ``send`` per packet, ``close``) and a
+:class:`Receiver` (``header``, then ``packets()`` in sequence order, ``stats`` counting what
+was lost). Every channel implements both ends or one of them.
 """
 
 from __future__ import annotations
@@ -21,10 +22,21 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
+from collections.abc import Iterator
+from typing import Protocol
 
-from lfstream.bitstream import Limits, Packet, StreamHeader, StreamWriter, pack_header, pack_packet, read_header, read_packet
+from lfstream.codec.bitstream import (
+    Limits,
+    Packet,
+    StreamHeader,
+    StreamWriter,
+    pack_header,
+    pack_packet,
+    read_header,
+    read_packet,
+)
 from lfstream.errors import BitstreamError, LFFileError, LFStreamError, LFValueError
+from lfstream.io._fs import temp_sibling
 
 _FRAME = struct.Struct(">4sI")
 TAG_HEADER, TAG_PACKET, TAG_END = b"LFSH", b"LFSP", b"LFSE"
@@ -87,6 +99,36 @@ class SequenceFilter:
         return False
 
 
+class Sender(Protocol):
+    """The encoder's end of a channel."""
+
+    def send_header(self, header: StreamHeader) -> None: ...
+
+    def send(self, packet: Packet, stop: threading.Event | None = None) -> bool: ...
+
+    def close(self, stop: threading.Event | None = None) -> None: ...
+
+
+class Receiver(Protocol):
+    """The decoder's end of a channel."""
+
+    stats: ReceiveStats
+
+    def header(self, stop: threading.Event | None = None) -> StreamHeader: ...
+
+    def packets(self, stop: threading.Event | None = None) -> Iterator[Packet]: ...
+
+
+def in_order(arrived: Iterator[Packet], stats: ReceiveStats) -> Iterator[Packet]:
+    """The one receive loop: counts every packet that arrived and yields those the
+    :class:`SequenceFilter` accepts (in increasing sequence order)."""
+    seqf = SequenceFilter(stats)
+    for packet in arrived:
+        stats.received += 1
+        if seqf.accept(packet):
+            yield packet
+
+
 # ----------------------------------------------------------------------------------------
 # in-process
 
@@ -120,17 +162,7 @@ class InprocChannel:
         return self._header
 
     def packets(self, stop: threading.Event | None = None) -> Iterator[Packet]:
-        seqf = SequenceFilter(self.stats)
-        while True:
-            item = get_until_stopped(self._q, stop)
-            if item is None:
-                return
-            self.stats.received += 1
-            if seqf.accept(item):
-                yield item
-
-    def qsize(self) -> int:
-        return self._q.qsize()
+        return in_order(iter(lambda: get_until_stopped(self._q, stop), None), self.stats)
 
 
 def put_until_stopped(q: queue.Queue, item, stop: threading.Event | None) -> bool:
@@ -194,14 +226,13 @@ class FileChannel:
 
     def __init__(self, path: str | Path, limits: Limits = Limits()) -> None:
         self.path = Path(path)
-        self._tmp = self.path.with_name(f".{self.path.name}.partial")
+        self._tmp = temp_sibling(self.path, "partial")
         self._limits = limits
         self._done = threading.Event()
         self._started = threading.Event()
         self._writer: StreamWriter | None = None
         self._fh = None
         self.stats = ReceiveStats()
-        self.bytes_written = 0
 
     def send_header(self, header: StreamHeader) -> None:
         try:
@@ -220,7 +251,6 @@ class FileChannel:
 
     def close(self, stop: threading.Event | None = None) -> None:
         if self._fh is not None:
-            self.bytes_written = self._writer.bytes_written if self._writer else 0
             self._fh.close()
             self._fh = None
             self._tmp.replace(self.path)
@@ -242,15 +272,8 @@ class FileChannel:
     def packets(self, stop: threading.Event | None = None) -> Iterator[Packet]:
         """Packets in order; damage inside a file cannot be resynchronised, so it raises
         :class:`BitstreamError` after every complete packet before it."""
-        seqf = SequenceFilter(self.stats)
         try:
-            while True:
-                packet = read_packet(self._reader, self._hdr, self._limits)
-                if packet is None:
-                    return
-                self.stats.received += 1
-                if seqf.accept(packet):
-                    yield packet
+            yield from in_order(iter(lambda: read_packet(self._reader, self._hdr, self._limits), None), self.stats)
         finally:
             self._reader.close()
 
@@ -372,29 +395,29 @@ class TcpReceiver:
         self._header = read_header(io.BytesIO(payload), self._limits)
         return self._header
 
-    def packets(self, stop: threading.Event | None = None) -> Iterator[Packet]:
+    def _arrived(self, stop: threading.Event | None) -> Iterator[Packet]:
+        """Every well-formed packet message until the end marker; damage is counted and skipped."""
         assert self._header is not None
-        seqf = SequenceFilter(self.stats)
+        while not (stop is not None and stop.is_set()):
+            tag, payload = self._message()
+            if tag == TAG_END:
+                return
+            if tag == TAG_HEADER:
+                self.stats.corrupt += 1
+                self.stats.note("a second stream header was skipped")
+                continue
+            try:
+                packet = read_packet(io.BytesIO(payload), self._header, self._limits)
+            except BitstreamError as exc:
+                self.stats.corrupt += 1
+                self.stats.note(f"corrupt packet skipped: {exc}")
+                continue
+            if packet is not None:
+                yield packet
+
+    def packets(self, stop: threading.Event | None = None) -> Iterator[Packet]:
         try:
-            while not (stop is not None and stop.is_set()):
-                tag, payload = self._message()
-                if tag == TAG_END:
-                    return
-                if tag == TAG_HEADER:
-                    self.stats.corrupt += 1
-                    self.stats.note("a second stream header was skipped")
-                    continue
-                try:
-                    packet = read_packet(io.BytesIO(payload), self._header, self._limits)
-                except BitstreamError as exc:
-                    self.stats.corrupt += 1
-                    self.stats.note(f"corrupt packet skipped: {exc}")
-                    continue
-                if packet is None:
-                    continue
-                self.stats.received += 1
-                if seqf.accept(packet):
-                    yield packet
+            yield from in_order(self._arrived(stop), self.stats)
         finally:
             self.close()
 
@@ -405,5 +428,26 @@ class TcpReceiver:
         self._server.close()
 
 
-__all__ = ["InprocChannel", "FileChannel", "TcpSender", "TcpReceiver", "ReceiveStats", "SequenceFilter",
+class LazyTcpSender:
+    """A :class:`TcpSender` that connects when the encoder sends the stream header, for a
+    loopback stream whose receiver starts listening in the same run."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self._addr = (host, port)
+        self._sender: TcpSender | None = None
+
+    def send_header(self, header: StreamHeader) -> None:
+        self._sender = TcpSender(*self._addr)
+        self._sender.send_header(header)
+
+    def send(self, packet: Packet, stop: threading.Event | None = None) -> bool:
+        assert self._sender is not None, "send_header first"
+        return self._sender.send(packet, stop)
+
+    def close(self, stop: threading.Event | None = None) -> None:
+        if self._sender is not None:
+            self._sender.close(stop)
+
+
+__all__ = ["Sender", "Receiver", "in_order", "LazyTcpSender", "InprocChannel", "FileChannel", "TcpSender", "TcpReceiver", "ReceiveStats", "SequenceFilter",
            "TransportError", "parse_address", "put_until_stopped", "get_until_stopped", "TAG_HEADER", "TAG_PACKET", "TAG_END"]

@@ -22,7 +22,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lfstream._layers import Bottleneck, count_params
+from lfstream.models.layers import Bottleneck, count_params
 from lfstream.errors import LFShapeError
 from lfstream.optics import SEED_ALPHAS
 
@@ -109,15 +109,10 @@ class RefNet(nn.Module):
         return (base[:, None] + y).clamp(0, 1)
 
 
-def refnet_focal_stack(lf: torch.Tensor, model: RefNet) -> torch.Tensor:
-    """Focal stack of a batch of light fields by RefNet (see :class:`RefNet`)."""
-    return model(lf)
-
-
 def build_refnet(preset: str = "fast", views: tuple[int, int] = (7, 7)) -> RefNet:
     from dataclasses import replace
 
     return RefNet(replace(REFNET_PRESETS[preset], views=tuple(views)))
 
 
-__all__ = ["INFERENCE_DTYPE", "RefNetConfig", "REFNET_PRESETS", "RefNet", "refnet_focal_stack", "build_refnet", "count_params"]
+__all__ = ["INFERENCE_DTYPE", "RefNetConfig", "REFNET_PRESETS", "RefNet", "build_refnet", "count_params"]

@@ -27,8 +27,8 @@ Packet (the unit every transport carries)::
     gain_len     u32      length of the per-view gain maps (0: none)
     meta_len     u32      length of the per-frame metadata (0: none)
     image        bytes
-    hint         bytes    zstd-compressed quantised disparity (see :mod:`lfstream.depth`)
-    gain         bytes    per-view brightness gains (see :mod:`lfstream.shading`)
+    hint         bytes    zstd-compressed quantised disparity (see :mod:`lfstream.codec.hint`)
+    gain         bytes    per-view brightness gains (see :mod:`lfstream.codec.shading`)
     meta         bytes    zstd-compressed JSON
     crc          u32      CRC32 of the packet from ``sync`` to the end of ``meta``
 
@@ -242,14 +242,6 @@ def iter_packets(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits()) 
         expected += 1
 
 
-def packet_meta(packet: Packet, limits: Limits = Limits()) -> dict:
-    return _decompress_json(packet.meta, limits.max_meta_bytes, "packet", packet.seq)
-
-
-def make_packet_meta(obj: dict) -> bytes:
-    return _compress_json(obj)
-
-
 class StreamWriter:
     """Writes a header and packets to a binary file-like object."""
 
@@ -287,8 +279,6 @@ __all__ = [
     "read_header",
     "read_packet",
     "iter_packets",
-    "packet_meta",
-    "make_packet_meta",
     "StreamWriter",
     "split_stream",
     "check_header_values",

@@ -1,27 +1,29 @@
 """Model registry and shipped weights.
 
 Every network is registered once under ``(name, preset)``; registering a name twice is an
-error (no silent overwrite). Trained weights live in ``lfstream/weights/`` as
+error (no silent overwrite). Trained weights live in ``lfstream/models/weights/`` as
 ``NAME-PRESET.pt`` (a ``state_dict`` plus the architecture config) and are described in
-``lfstream/weights/manifest.json``: file, SHA-256, parameter count, training recipe and
+``lfstream/models/weights/manifest.json``: file, SHA-256, parameter count, training recipe and
 reference metrics. Loading checks the SHA-256 and the parameter count and never touches
 the network; a missing or corrupt file raises :class:`lfstream.WeightsError`.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
 from dataclasses import asdict, dataclass, fields, is_dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import torch
 from torch import nn
 
-from lfstream._layers import count_params
+from lfstream.models.layers import count_params
 from lfstream.errors import LFValueError, WeightsError
+from lfstream.io._fs import atomic_path, atomic_write_text
 
 WEIGHTS_DIR = Path(__file__).with_name("weights")
 MANIFEST = WEIGHTS_DIR / "manifest.json"
@@ -55,9 +57,9 @@ def register(spec: ModelSpec) -> None:
 
 
 def _register_builtin() -> None:
-    from lfstream.depth_net import DEPTH_PRESETS, DepthNet, DepthNetConfig
-    from lfstream.refnet import REFNET_PRESETS, RefNet, RefNetConfig
-    from lfstream.restore import HANCE_PRESETS, HanceConfig, JPEGHance
+    from lfstream.models.depth_net import DEPTH_PRESETS, DepthNet, DepthNetConfig
+    from lfstream.models.jpeg_hance import HANCE_PRESETS, HanceConfig, JPEGHance
+    from lfstream.models.refnet import REFNET_PRESETS, RefNet, RefNetConfig
 
     for preset in PRESETS:
         register(ModelSpec("jpeg_hance", preset, JPEGHance, HanceConfig, HANCE_PRESETS[preset]))
@@ -115,11 +117,6 @@ def manifest_entry(name: str, preset: str) -> dict | None:
     return None
 
 
-def weights_path(name: str, preset: str = "fast") -> Path | None:
-    entry = manifest_entry(name, preset)
-    return WEIGHTS_DIR / entry["file"] if entry else None
-
-
 def load_model(name: str, preset: str = "fast", device: str | torch.device = "cpu",
                path: str | os.PathLike | None = None, sha256: str | None = None) -> nn.Module:
     """Builds a registered network and loads its trained weights (eval mode).
@@ -159,15 +156,22 @@ def load_model(name: str, preset: str = "fast", device: str | torch.device = "cp
     return model.to(device).eval()
 
 
+@functools.lru_cache(maxsize=16)
+def shipped_model(name: str, preset: str = "fast", device: str = "cpu") -> nn.Module:
+    """The shipped weights of ``name/preset`` on ``device``, loaded and SHA-checked once per
+    process (the pipeline decodes and refocuses frame after frame). Inference only: callers
+    must not train or modify the returned module."""
+    return load_model(name, preset, device)
+
+
 def save_checkpoint(model: nn.Module, name: str, preset: str, path: str | os.PathLike) -> str:
     """Writes ``{config, state_dict}`` atomically; returns the file's SHA-256."""
     path = Path(path)
     config = model.config
     payload = {"name": name, "preset": preset, "config": asdict(config) if is_dataclass(config) else dict(config),
                "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}}
-    tmp = path.with_name(f".{path.name}.tmp")
-    torch.save(payload, tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
     return sha256_file(path)
 
 
@@ -182,9 +186,7 @@ def ship_weights(model: nn.Module, name: str, preset: str, recipe: dict, metrics
     manifest["models"] = [e for e in manifest.get("models", []) if (e["name"], e["preset"]) != (name, preset)]
     manifest["models"].append(entry)
     manifest["models"].sort(key=lambda e: (e["name"], e["preset"]))
-    tmp = MANIFEST.with_name(".manifest.json.tmp")
-    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
-    os.replace(tmp, MANIFEST)
+    atomic_write_text(MANIFEST, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
     return entry
 
 
@@ -201,4 +203,4 @@ def list_models() -> list[dict]:
 
 
 __all__ = ["ModelSpec", "REGISTRY", "register", "spec", "load_model", "ship_weights", "save_checkpoint",
-           "list_models", "weights_path", "sha256_file", "MODEL_NAMES", "PRESETS", "WEIGHTS_DIR"]
+           "list_models", "shipped_model", "sha256_file", "MODEL_NAMES", "PRESETS", "WEIGHTS_DIR"]

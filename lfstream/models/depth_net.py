@@ -28,7 +28,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lfstream._layers import Bottleneck, count_params
+from lfstream.models.layers import Bottleneck, count_params
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import to_network_input
 
@@ -141,13 +141,6 @@ class DepthNet(nn.Module):
         return d.reshape(b, cfg.views[0], cfg.views[1], h, w)
 
 
-def depth_net(centre: torch.Tensor, model: DepthNet, hint: torch.Tensor | None = None) -> torch.Tensor:
-    """Per-view disparities of a batch of centre views (see :class:`DepthNet`)."""
-    if centre.ndim != 4 or centre.shape[1] != 3:
-        raise LFShapeError(f"centre: expected (B, 3, H, W), got {tuple(centre.shape)}")
-    return model(centre, hint)
-
-
 def grid_disparities(maps: torch.Tensor | "np.ndarray", views: tuple[int, int]):
     """Maps a network's per-view disparities onto another view grid.
 
@@ -194,4 +187,4 @@ def build_depth_net(preset: str = "fast", views: tuple[int, int] = (7, 7), hint:
     return DepthNet(replace(cfg, views=tuple(views), hint=cfg.hint if hint is None else hint))
 
 
-__all__ = ["DepthNetConfig", "DEPTH_PRESETS", "DepthNet", "depth_net", "grid_disparities", "predict_view_disparities", "build_depth_net", "count_params"]
+__all__ = ["DepthNetConfig", "DEPTH_PRESETS", "DepthNet", "grid_disparities", "predict_view_disparities", "build_depth_net", "count_params"]

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from lfstream._layers import Bottleneck, count_params
+from lfstream.models.layers import Bottleneck, count_params
 from lfstream.errors import LFShapeError
 from lfstream.lightfield import to_network_input
 

@@ -25,7 +25,6 @@ import numpy as np
 
 from lfstream.errors import LFValueError
 from lfstream.lightfield import check_lf, to_uint8
-from lfstream.metrics import bpp as bits_per_pixel
 
 ORDERS = ("raster", "serpentine", "spiral")
 MIN_CRF_SIDE = 64
@@ -165,6 +164,8 @@ def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "r
     HEVC bisects x265's fractional CRF until within ``tolerance`` (relative); AV1 bisects
     integer CRF and returns the closest. The rate falls monotonically with the parameter.
     """
+    from lfstream.metrics import bpp as bits_per_pixel  # metrics imports torch: only when searching
+
     spec = _codec(codec)
     if not (np.isfinite(target_bpp) and target_bpp > 0):
         raise LFValueError(f"target bpp must be positive, got {target_bpp!r}")

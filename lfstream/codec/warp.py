@@ -13,8 +13,6 @@ side, so a foreground edge neither smears into the background nor leaves a crack
 from __future__ import annotations
 
 import numpy as np
-import torch
-import torch.nn.functional as F
 
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_finite, to_uint8
@@ -49,7 +47,7 @@ def warp_views(
         return np.ascontiguousarray(np.broadcast_to(to_uint8(np.asarray(centre)), (u, v, h, w, c)))
     import cv2
 
-    from lfstream._kernels import view_sample_maps
+    from lfstream.codec._kernels import view_sample_maps
 
     # numba computes where every view pixel samples the centre view (splatting, z-test and
     # hole filling need per-pixel control); OpenCV's SIMD remap does the bilinear sampling,
@@ -64,28 +62,6 @@ def warp_views(
             cv2.remap(src if c > 1 else src[:, :, 0], maps[a, b], None, cv2.INTER_LINEAR, dst=dst,
                       borderMode=cv2.BORDER_REPLICATE)
     return out
-
-
-def warp_views_torch(centre: torch.Tensor, disparity: torch.Tensor, views: tuple[int, int]) -> torch.Tensor:
-    """Backward warp with the centre map as every view's disparity (no occlusion handling),
-    on any torch device: ``grid_sample`` with border clamping. Differentiable, for training.
-
-    Shape:
-        - centre: ``(B, C, H, W)`` float; disparity: ``(B, 1, H, W)``
-        - output: ``(B, U, V, C, H, W)``
-    """
-    b, c, h, w = centre.shape
-    u_n, v_n = views
-    ys, xs = torch.meshgrid(torch.arange(h, device=centre.device, dtype=centre.dtype),
-                            torch.arange(w, device=centre.device, dtype=centre.dtype), indexing="ij")
-    out = []
-    for u in range(u_n):
-        for v in range(v_n):
-            sy = ys + disparity[:, 0] * (u - u_n // 2)
-            sx = xs + disparity[:, 0] * (v - v_n // 2)
-            grid = torch.stack([sx / max(w - 1, 1) * 2 - 1, sy / max(h - 1, 1) * 2 - 1], dim=-1)
-            out.append(F.grid_sample(centre, grid, mode="bilinear", padding_mode="border", align_corners=True))
-    return torch.stack(out, 1).reshape(b, u_n, v_n, c, h, w)
 
 
 def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray) -> np.ndarray:
@@ -125,4 +101,4 @@ def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray) -> np.ndarr
     return out
 
 
-__all__ = ["warp_views", "warp_views_torch", "warp_views_per_view"]
+__all__ = ["warp_views", "warp_views_per_view"]

@@ -1,0 +1,127 @@
+"""What the subcommands share: argument types with ranges from the library's constants,
+the reading options, and the one way a result is printed (strict JSON or text)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.io.readers import ReadOptions
+
+
+def parse_grid(text: str) -> tuple[int, int]:
+    """Parses ``UxV`` (or ``N``) into a view grid."""
+    try:
+        parts = [int(p) for p in text.lower().split("x")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"grid must look like 7x7, got {text!r}") from None
+    if len(parts) == 1:
+        parts = parts * 2
+    if len(parts) != 2 or min(parts) < 1:
+        raise argparse.ArgumentTypeError(f"grid must look like 7x7, got {text!r}")
+    return parts[0], parts[1]
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """Parses ``HxW``."""
+    return parse_grid(text)
+
+
+def parse_float_list(text: str) -> list[float]:
+    """Parses ``0.5,1,2`` (commas or spaces) into numbers."""
+    try:
+        values = [float(x) for x in text.replace(",", " ").split()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of numbers, got {text!r}") from None
+    if not values or not all(math.isfinite(x) for x in values):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    return values
+
+
+def int_in(bounds: tuple[int, int]) -> Callable[[str], int]:
+    """An argparse type: an integer within ``bounds`` (inclusive), taken from the library."""
+    lo, hi = bounds
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer in {lo}..{hi}, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be in {lo}..{hi}, got {value}")
+        return value
+
+    parse.__name__ = f"integer {lo}..{hi}"
+    return parse
+
+
+def float_in(lo: float, hi: float) -> Callable[[str], float]:
+    """An argparse type: a finite number within ``[lo, hi]``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number in {lo:g}..{hi:g}, got {text!r}") from None
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise argparse.ArgumentTypeError(f"must be in {lo:g}..{hi:g}, got {text}")
+        return value
+
+    parse.__name__ = f"number {lo:g}..{hi:g}"
+    return parse
+
+
+def add_read_options(p: argparse.ArgumentParser) -> None:
+    """Options every command that reads a light field shares (:class:`ReadOptions`)."""
+    from lfstream.lightfield import MAX_VIEWS_PER_AXIS
+
+    g = p.add_argument_group("reading")
+    g.add_argument("--angular", type=int_in((1, MAX_VIEWS_PER_AXIS)),
+                   help="microlens size in pixels of a lenslet (ESLF) image (Lytro Illum: 14)")
+    g.add_argument("--views", "--crop", dest="crop", type=int_in((1, MAX_VIEWS_PER_AXIS)),
+                   help="keep the central N x N views")
+    g.add_argument("--grid", type=parse_grid, help="view grid UxV of a mosaic image or video without metadata")
+    g.add_argument("--flip-u", action="store_true", help="reverse the order of view rows")
+    g.add_argument("--flip-v", action="store_true", help="reverse the order of view columns")
+    g.add_argument("--allow-missing", action="store_true", help="load a folder with missing views, with a mask")
+    g.add_argument("--max-frames", type=int_in((1, 1 << 30)), help="read at most this many frames")
+
+
+def read_options(args: argparse.Namespace) -> ReadOptions:
+    """The :class:`ReadOptions` the reading flags describe."""
+    return ReadOptions(angular=args.angular, crop=args.crop, grid=args.grid, flip_u=args.flip_u, flip_v=args.flip_v,
+                       allow_missing=args.allow_missing, max_frames=args.max_frames)
+
+
+def load_from_args(args: argparse.Namespace):
+    """The :class:`~lfstream.io.LoadedLF` of ``args.input`` read with the reading flags."""
+    from lfstream.io.readers import load_lf
+
+    return load_lf(args.input, read_options(args))
+
+
+def _json_default(o: object):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def emit(args: argparse.Namespace, result: dict, text: Callable[[dict], str] | str) -> None:
+    """Prints ``result`` as one JSON object under ``--json``, else the text ``text(result)``."""
+    if getattr(args, "json", False):
+        print(json.dumps(result, indent=2, default=_json_default))
+    else:
+        print(text(result) if callable(text) else text)
+
+
+__all__ = ["parse_grid", "parse_size", "parse_float_list", "int_in", "float_in", "add_read_options", "read_options",
+           "load_from_args", "emit"]

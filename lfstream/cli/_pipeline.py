@@ -1,0 +1,76 @@
+"""What ``stream`` and ``serve`` share: the pipeline flags, the config they build, the report."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from lfstream.cli._common import emit, int_in
+from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
+from lfstream.stream.config import BATCH_RANGE, QUEUE_RANGE, REFOCUS_MODES, SAVE_KINDS, StreamConfig
+
+
+def add_pipeline_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-o", "--output", type=Path, help="output folder (default: a new ./lfstream-out[-N])")
+    p.add_argument("--refocus", choices=REFOCUS_MODES, default="auto",
+                   help="focal-stack renderer (auto: picked per device by measured speed and error)")
+    p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
+    p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1, help="frames per network batch in the decoder")
+    p.add_argument("--depth", choices=DEPTH_MODES, default="auto")
+    p.add_argument("--hance", choices=HANCE_MODES, default="auto")
+    p.add_argument("--save", default="mp4", help=f"comma list of {', '.join(SAVE_KINDS)} "
+                   "(mp4: one per focal plane)")
+    p.add_argument("--no-skip-static", action="store_true", help="always recompute the disparity")
+    p.add_argument("--skip-planes", action="store_true",
+                   help="render focal planes outside the scene's disparity range by a cheap path")
+    p.add_argument("--mssim-every", type=int_in((0, 1 << 30)), default=10,
+                   help="MSSIM on every N-th frame (0: never; MPSNR on all)")
+    p.add_argument("--queue-size", type=int_in(QUEUE_RANGE), default=4)
+    p.add_argument("--progress", action="store_true", help="a status line on stderr (default when it is a terminal)")
+    p.add_argument("--json", action="store_true")
+
+
+def pipeline_config(args: argparse.Namespace, **extra) -> StreamConfig:
+    """The :class:`StreamConfig` the flags describe (``extra``: fields only ``stream`` sets)."""
+    cfg = StreamConfig(refocus=args.refocus, device=args.device, batch=args.batch, depth=args.depth, hance=args.hance,
+                       save=tuple(s for s in args.save.split(",") if s), skip_static=not args.no_skip_static,
+                       skip_planes=args.skip_planes, mssim_every=args.mssim_every, queue_size=args.queue_size, **extra)
+    cfg.validate()
+    return cfg
+
+
+def progress_callback(args: argparse.Namespace):
+    """The status-line printer, when asked for or when stderr is a terminal (never under --json)."""
+    from lfstream.stream.report import stderr_progress
+
+    return stderr_progress if (args.progress or (sys.stderr.isatty() and not args.json)) else None
+
+
+def _text(summary: dict, out: Path | None) -> str:
+    lines = [f"{summary['frames']} frame(s), {summary['fps']} frames/s end to end"
+             + (f", {summary['bpp']:.5f} bpp" if summary.get("bpp") else "")
+             + (f", MPSNR {summary['mpsnr']:.2f} dB" if summary.get("mpsnr") is not None else "")
+             + (f", MSSIM {summary['mssim']:.4f}" if summary.get("mssim") is not None else "")
+             + f", lost {summary['lost']}" + (" (interrupted)" if summary.get("interrupted") else "")]
+    for name, s in summary.get("stages", {}).items():
+        lines.append(f"  {name:9s} {s['frames']:5d} frames  {s['ms_per_frame'] or 0:8.1f} ms/frame")
+    if summary.get("refocus"):
+        lines.append(f"  refocus: {summary['refocus']['method']} ({summary['refocus']['why']})")
+    if out is not None:
+        lines.append(f"  outputs in {out} (summary.json)")
+    return "\n".join(lines)
+
+
+def report(args: argparse.Namespace, summary: dict, out: Path | None) -> None:
+    """Writes ``summary.json`` into ``out`` and prints the summary (JSON or text)."""
+    from lfstream.stream.report import write_summary
+
+    if out is not None:
+        write_summary(out, summary)
+    if not args.json:
+        sys.stderr.write("\n")
+    emit(args, summary, lambda s: _text(s, out))
+
+
+__all__ = ["add_pipeline_options", "pipeline_config", "progress_callback", "report"]

@@ -1,0 +1,64 @@
+"""``lfstream decode``: an ``.lfs`` stream to a light field (``.npy``, folder or video)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.cli._common import emit, int_in
+from lfstream.codec.decoder import BATCH_RANGE, DEPTH_MODES, HANCE_MODES
+
+HELP = "decode an .lfs stream to a light field (.npy, folder or video)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", type=Path)
+    p.add_argument("-o", "--output", type=Path, required=True, help=".npy (T,U,V,H,W,3), .npz, a video or a folder")
+    p.add_argument("--depth", choices=DEPTH_MODES, default="auto",
+                   help="disparity source: the stream's hint, flat (zero), or Depth-Net (default: hint if present)")
+    p.add_argument("--no-occlusion", action="store_true", help="warp without occlusion-aware per-view disparity")
+    p.add_argument("--no-hance", action="store_true", help="skip JPEG-Hance (default: run it where it helps)")
+    p.add_argument("--hance", choices=HANCE_MODES, default="auto",
+                   help="JPEG-Hance: auto (by the stream's JPEG quality, measured threshold), on or off")
+    p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
+    p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1, help="frames per network batch")
+    p.add_argument("--disparity-out", type=Path, help="folder for the centre-view disparity of each frame (PFM)")
+    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--json", action="store_true")
+
+
+def run(args: argparse.Namespace) -> int:
+    from lfstream.codec.decoder import iter_decode
+    from lfstream.errors import BitstreamError, LFFileError
+    from lfstream.io import write_lf, write_pfm
+    from lfstream.io._fs import check_new_file
+
+    check_new_file(args.output, args.overwrite)
+    if args.disparity_out is not None:
+        args.disparity_out.mkdir(parents=True, exist_ok=True)
+    frames, error = [], None
+    t0 = time.perf_counter()
+    try:
+        with open(args.input, "rb") as fh:
+            hance = "off" if args.no_hance else args.hance
+            for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
+                                 device=args.device, batch=args.batch):
+                frames.append(f.lf)
+                if args.disparity_out is not None:
+                    write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
+    except OSError as exc:
+        raise LFFileError(f"{args.input}: cannot read ({exc.strerror or exc})") from exc
+    except BitstreamError as exc:
+        error = exc
+    decode_s = time.perf_counter() - t0
+    if frames:
+        # a damaged stream still gives a valid output of every frame before the damage
+        write_lf(args.output, np.stack(frames), overwrite=args.overwrite)
+    if error is not None:
+        raise BitstreamError(f"{args.input}: {error} ({len(frames)} complete frame(s) before it written to {args.output})")
+    result = {"frames": len(frames), "decode_s": decode_s, "output": str(args.output)}
+    emit(args, result, f"{len(frames)} frame(s) decoded in {decode_s:.3f} s -> {args.output}")
+    return 0

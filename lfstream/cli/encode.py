@@ -1,0 +1,42 @@
+"""``lfstream encode``: a light field or LF video to an ``.lfs`` stream."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+from lfstream.cli._common import add_read_options, emit, float_in, int_in, load_from_args
+from lfstream.codec.jpeg import QUALITY_RANGE
+
+HELP = "encode a light field or LF video to an .lfs stream (JPEG centre view)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", type=Path)
+    p.add_argument("-o", "--output", type=Path, required=True, help="the .lfs file (never overwritten without --overwrite)")
+    p.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="JPEG quality of the centre view (default 50)")
+    p.add_argument("--depth-hint", action="store_true", help="also send the encoder's disparity estimate")
+    p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate to record (default: the input's, else 30)")
+    p.add_argument("--overwrite", action="store_true")
+    add_read_options(p)
+    p.add_argument("--json", action="store_true")
+
+
+def run(args: argparse.Namespace) -> int:
+    from lfstream.codec.encoder import Encoder, encode_file, frames_of
+    from lfstream.io._fs import check_new_file
+    from lfstream.metrics import bpp
+
+    check_new_file(args.output, args.overwrite)
+    loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
+    frames = frames_of(loaded.lf)
+    enc = Encoder(quality=args.quality, depth_hint=args.depth_hint)
+    stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), enc,
+                        fps=args.fps or loaded.fps or 30.0, present=loaded.present)
+    result = dataclasses.asdict(stats)
+    result.update({"output": str(args.output), "bpp": bpp(stats.bytes, frames.shape),
+                   "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": args.quality})
+    emit(args, result, lambda r: f"{r['frames']} frame(s) -> {args.output}: {r['bytes']} bytes, {r['bpp']:.5f} bpp"
+         + (f" (hint {r['hint_bpp']:.5f} bpp)" if args.depth_hint else "") + f", encoded in {r['encode_s']:.3f} s")
+    return 0

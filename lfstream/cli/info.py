@@ -1,0 +1,67 @@
+"""``lfstream info``: format, frames, views, view size, dtype and bytes of a light field."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.cli._common import add_read_options, emit, load_from_args
+
+HELP = "describe a light field or LF video: format, frames, views, view size, dtype, bytes"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", type=Path, help="file or folder")
+    add_read_options(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def describe(loaded) -> dict:
+    """The ``info`` summary of a :class:`~lfstream.io.LoadedLF` as a JSON-ready dict."""
+    lf = loaded.lf
+    out = {
+        "path": str(loaded.path),
+        "format": loaded.format,
+        "frames": loaded.frames,
+        "views": list(loaded.views),
+        "size": list(loaded.size),
+        "channels": int(lf.shape[-1]),
+        "dtype": str(lf.dtype),
+        "bytes": int(lf.nbytes),
+        "fps": loaded.fps,
+        "missing_views": None
+        if loaded.present is None
+        else [[int(r), int(c)] for r, c in zip(*np.nonzero(~loaded.present))],
+        "has_weight": loaded.weight is not None,
+        "has_disparity": loaded.disparity is not None,
+    }
+    if loaded.disparity is not None:
+        d = loaded.disparity
+        out["disparity_range"] = [float(d.min()), float(d.max())]
+    return out
+
+
+def _text(info: dict) -> str:
+    u, v = info["views"]
+    h, w = info["size"]
+    lines = [f"{info['path']}: {info['format']}",
+             f"  frames  {info['frames']}" + (f" at {info['fps']:.3g} fps" if info["fps"] else ""),
+             f"  views   {u} x {v} (centre {u // 2},{v // 2})",
+             f"  size    {h} x {w} x {info['channels']}",
+             f"  dtype   {info['dtype']}, {info['bytes'] / 1e6:.1f} MB in memory"]
+    if info["missing_views"]:
+        lines.append(f"  missing {len(info['missing_views'])} views: "
+                     + " ".join(f"{r},{c}" for r, c in info["missing_views"]))
+    if info["has_weight"]:
+        lines.append("  weight  per-sample alpha weight present")
+    if info["has_disparity"]:
+        lo, hi = info["disparity_range"]
+        lines.append(f"  disparity ground truth, {lo:.3f} .. {hi:.3f} px/view")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    emit(args, describe(load_from_args(args)), _text)
+    return 0

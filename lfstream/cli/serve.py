@@ -1,0 +1,38 @@
+"""``lfstream serve``: receive a stream over TCP, decode, refocus and write the outputs."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from lfstream.cli._common import float_in, int_in
+from lfstream.cli._pipeline import add_pipeline_options, pipeline_config, progress_callback, report
+
+HELP = "receive a stream over TCP, decode, refocus and write the outputs"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default loopback only)")
+    p.add_argument("--port", type=int_in((0, 65535)), default=7820, help="TCP port (0: any free port)")
+    p.add_argument("--keep-open", action="store_true", help="serve one sender after another until Ctrl-C")
+    p.add_argument("--timeout", type=float_in(0.1, 86400), default=300.0,
+                   help="seconds to wait for a sender or for data")
+    add_pipeline_options(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from lfstream.io._fs import fresh_dir, prepare_output_dir
+    from lfstream.stream import Pipeline
+    from lfstream.stream.transport import TcpReceiver
+
+    cfg = pipeline_config(args)
+    while True:
+        # each sender's outputs in a folder of their own, never one that holds results
+        out = prepare_output_dir(fresh_dir(args.output or "lfstream-serve"))
+        receiver = TcpReceiver(args.host, args.port, timeout_s=args.timeout)
+        if not args.json:
+            print(f"listening on {receiver.address[0]}:{receiver.address[1]} -> {out}", file=sys.stderr)
+        summary = Pipeline(None, cfg, out, receiver=receiver, progress=progress_callback(args)).run()
+        report(args, summary, out)
+        if not args.keep_open or summary["interrupted"]:
+            return 130 if summary["interrupted"] else 0

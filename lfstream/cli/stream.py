@@ -1,0 +1,49 @@
+"""``lfstream stream``: an LF video (default: the built-in clip) through the whole pipeline."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from lfstream.cli._common import add_read_options, int_in, read_options
+from lfstream.cli._pipeline import add_pipeline_options, pipeline_config, progress_callback, report
+from lfstream.codec.jpeg import QUALITY_RANGE
+from lfstream.stream.config import TRANSPORTS
+
+HELP = "stream an LF video (default: the built-in synthetic clip) through the whole pipeline"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", type=Path, nargs="?", help="LF video / light field (default: built-in synthetic clip)")
+    p.add_argument("--transport", choices=TRANSPORTS, default="inproc")
+    p.add_argument("--to", help="HOST:PORT of an `lfstream serve`: send there instead of decoding here")
+    p.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50)
+    p.add_argument("--no-depth-hint", action="store_true", help="send only the JPEG centre view")
+    p.add_argument("--frames", type=int_in((1, 1 << 20)), default=12, help="frames of the built-in clip")
+    add_pipeline_options(p)
+    add_read_options(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from lfstream.io._fs import fresh_dir, prepare_output_dir
+    from lfstream.stream import Pipeline, file_source, synthetic_source
+    from lfstream.stream.transport import TcpSender, parse_address
+
+    fps = 30.0
+    if args.input is None:
+        source = synthetic_source(frames=args.frames)
+    else:
+        source, src_fps = file_source(args.input, read_options(args))
+        fps = src_fps or fps
+    cfg = pipeline_config(args, quality=args.quality, depth_hint=not args.no_depth_hint, transport=args.transport,
+                          fps=fps)
+    sender, out = None, None
+    if args.to:
+        sender = TcpSender(*parse_address(args.to))
+    else:
+        out = prepare_output_dir(args.output or fresh_dir("lfstream-out"))
+    pipe = Pipeline(source, cfg, out, sender=sender, progress=progress_callback(args),
+                    stream_file=(out / "stream.lfs") if out is not None else None)
+    summary = pipe.run()
+    report(args, summary, out)
+    return 130 if summary["interrupted"] else 0

@@ -1,0 +1,58 @@
+"""The lfstream codec (seed chapter 3): JPEG centre view + depth-based reconstruction.
+
+Data flow, one module per step:
+
+- :mod:`~lfstream.codec.encoder`: the frame -> a :class:`~lfstream.codec.bitstream.Packet`
+  (the centre view by :mod:`~lfstream.codec.jpeg`, the depth hint by
+  :mod:`~lfstream.codec.hint`, per-view gains by :mod:`~lfstream.codec.shading`).
+- :mod:`~lfstream.codec.bitstream`: the ``.lfs`` container (header, packets, limits, CRCs).
+- :mod:`~lfstream.codec.decoder`: packet -> light field (JPEG-Hance where it helps,
+  disparity from the hint, flat or Depth-Net, the occlusion-aware warp of
+  :mod:`~lfstream.codec.warp`, the gains).
+- :mod:`~lfstream.codec.baseline`: the HEVC/AV1 pseudo-sequence the codec is judged against.
+
+Importing this package does not import torch or compile kernels; the networks and the
+numba warp load when first used.
+"""
+
+from lfstream.codec.bitstream import Limits, Packet, StreamHeader
+from lfstream.codec.decoder import (
+    BATCH_RANGE,
+    DEPTH_MODES,
+    HANCE_MAX_QUALITY,
+    HANCE_MODES,
+    DecodedFrame,
+    Decoder,
+    decode,
+    decode_file,
+    iter_decode,
+)
+from lfstream.codec.encoder import ENCODER_NAME, Encoder, EncodeStats, encode, encode_file, frames_of
+from lfstream.codec.hint import HintOptions
+from lfstream.codec.jpeg import QUALITY_RANGE, decode_jpeg, encode_jpeg, jpeg_roundtrip
+
+__all__ = [
+    "BATCH_RANGE",
+    "DEPTH_MODES",
+    "HANCE_MODES",
+    "HANCE_MAX_QUALITY",
+    "QUALITY_RANGE",
+    "ENCODER_NAME",
+    "Limits",
+    "Packet",
+    "StreamHeader",
+    "HintOptions",
+    "Encoder",
+    "EncodeStats",
+    "Decoder",
+    "DecodedFrame",
+    "encode",
+    "decode",
+    "iter_decode",
+    "decode_file",
+    "encode_file",
+    "frames_of",
+    "encode_jpeg",
+    "decode_jpeg",
+    "jpeg_roundtrip",
+]

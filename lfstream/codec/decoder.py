@@ -1,0 +1,230 @@
+"""The decoder (seed chapter 3): JPEG decode, JPEG-Hance where it helps, a disparity per
+frame — from the hint (``depth="hint"``), zero (``depth="flat"``: every view is the centre
+view) or Depth-Net's per-view maps (``depth="net"``) — and the backward warp of the centre
+view into every view with occlusion handling (:mod:`lfstream.codec.warp`), then the
+per-view shading gains. The networks are pluggable stages with the shipped ``fast``
+weights; ``hance="off"`` and ``depth="flat"``/``"hint"`` are the non-learned fallbacks.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.codec.bitstream import Limits, Packet, StreamHeader, iter_packets, read_header
+from lfstream.codec.hint import decode_hint
+from lfstream.codec.jpeg import decode_jpeg
+from lfstream.codec.shading import apply_gains, decode_gains
+from lfstream.codec.warp import warp_views, warp_views_per_view
+from lfstream.errors import BitstreamError, LFFileError, LFValueError
+
+DEPTH_MODES = ("auto", "hint", "flat", "net")
+HANCE_MODES = ("auto", "on", "off")
+# "auto" runs JPEG-Hance only up to this JPEG quality per preset: above it the measured mean
+# PSNR gain on the real samples' centre views (seahorse, HCI dino/cotton) is below 0.1 dB or
+# negative (bench/networks.py: fast +0.32/+0.18/-0.14 dB at q10/30/50; paper +0.52 at q70,
+# -1.35 at q90).
+HANCE_MAX_QUALITY = {"fast": 30, "paper": 70}
+#: Frames per network batch the decoder accepts.
+BATCH_RANGE = (1, 256)
+
+
+@dataclass
+class DecodedFrame:
+    """A decoded frame with the intermediate results users ask for."""
+
+    seq: int
+    timestamp_us: int
+    lf: np.ndarray  # (U, V, H, W, 3) uint8
+    centre: np.ndarray  # (H, W, 3) uint8, the decoded centre view
+    disparity: np.ndarray  # (H, W) float32 centre-view disparity the warp used
+
+
+@dataclass
+class Decoder:
+    """Decodes packets of one stream: JPEG decode -> JPEG-Hance -> disparity -> warp.
+
+    Attributes:
+        header: the stream's header.
+        depth: ``"auto"`` (the hint where the stream has one, else flat), ``"hint"``,
+            ``"flat"`` or ``"net"`` (Depth-Net; its fast preset refines the depth hint).
+        occlusion: occlusion-aware per-view disparity in the warp (hint mode).
+        hance: ``"auto"`` (JPEG-Hance where it helps: stream quality <= HANCE_MAX_QUALITY[preset]),
+            ``"on"`` or ``"off"``.
+        device: where the networks run (``"cpu"`` or ``"cuda"``).
+        preset: network preset whose shipped weights are used.
+    """
+
+    header: StreamHeader
+    depth: str = "auto"
+    occlusion: bool = True
+    hance: str = "auto"
+    device: str = "cpu"
+    preset: str = "fast"
+
+    def __post_init__(self) -> None:
+        if self.depth not in DEPTH_MODES:
+            raise LFValueError(f"depth: one of {', '.join(DEPTH_MODES)}, got {self.depth!r}")
+        if self.hance not in HANCE_MODES:
+            raise LFValueError(f"hance: one of {', '.join(HANCE_MODES)}, got {self.hance!r}")
+        from lfstream.models.device import check_device
+
+        self.device = check_device(self.device)
+        if self.depth == "hint" and not self.header.has_hint:
+            raise LFValueError("depth='hint': this stream carries no depth hint (encode with depth_hint=True)")
+        from lfstream.models.registry import load_model
+
+        use_hance = self.hance == "on" or (self.hance == "auto"
+                                           and self.header.quality <= HANCE_MAX_QUALITY.get(self.preset, 0))
+        self._hance = load_model("jpeg_hance", self.preset, self.device) if use_hance else None
+        self._depth_net = None
+        if self.depth == "net":
+            self._depth_net = load_model("depth_net", self.preset, self.device)
+            if self._depth_net.config.hint and not self.header.has_hint:
+                raise LFValueError("depth='net': the shipped Depth-Net refines the encoder's depth hint and this "
+                                   "stream carries none (encode with --depth-hint, or decode with --depth flat)")
+
+    @property
+    def uses_hance(self) -> bool:
+        return self._hance is not None
+
+    def decode_packet(self, packet: Packet) -> DecodedFrame:
+        return self.decode_batch([packet])[0]
+
+    @property
+    def estimates_depth(self) -> bool:
+        """Whether frames get a disparity of their own (hint or Depth-Net), not flat."""
+        return self.depth in ("hint", "net") or (self.depth == "auto" and self.header.has_hint)
+
+    def decode_centres(self, packets: list[Packet]) -> np.ndarray:
+        """JPEG decode and (where enabled) JPEG-Hance of the packets' centre views, batched.
+
+        Shape:
+            - output: ``(B, H, W, 3)`` uint8
+        """
+        centres = np.stack([decode_jpeg(p.image, self.header.size, p.seq) for p in packets])
+        if self._hance is not None:
+            from lfstream.models.jpeg_hance import restore_images
+
+            centres = restore_images(centres, self._hance, self.device)
+        return centres
+
+    def reconstruct(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray) -> DecodedFrame:
+        """Warps a decoded centre view by a given centre-view disparity (occlusion-aware) and
+        applies the packet's shading gains; also serves callers that reuse a disparity."""
+        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion)
+        return self._finish(packet, centre, disparity, lf)
+
+    def _finish(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray, lf: np.ndarray) -> DecodedFrame:
+        if packet.gain:
+            lf = apply_gains(lf, decode_gains(packet.gain, self.header.views, packet.seq))
+        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity)
+
+    def decode_batch(self, packets: list[Packet], centres: np.ndarray | None = None) -> list[DecodedFrame]:
+        """Decodes several packets; the networks run once over the batch. ``centres``: the
+        output of :meth:`decode_centres` for these packets, when the caller already has it."""
+        if not packets:
+            return []
+        h, w = self.header.size
+        if centres is None:
+            centres = self.decode_centres(packets)
+        hints: list[np.ndarray | None] = []
+        for p, centre in zip(packets, centres):
+            use_hint = self.depth in ("hint", "net") or (self.depth == "auto" and p.hint)
+            if use_hint and not p.hint:
+                raise BitstreamError("packet has no depth hint", p.seq)
+            hints.append(decode_hint(p.hint, (h, w), guide=centre, frame=p.seq) if use_hint else None)
+        if self._depth_net is None:
+            return [self.reconstruct(p, centre, hint if hint is not None else np.zeros((h, w), np.float32))
+                    for p, centre, hint in zip(packets, centres, hints)]
+        from lfstream.models.depth_net import predict_view_disparities
+
+        stacked = np.stack(hints) if self._depth_net.config.hint else None
+        view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device)
+        u0, v0 = self.header.views[0] // 2, self.header.views[1] // 2
+        return [self._finish(p, centre, maps[u0, v0], warp_views_per_view(centre, maps))
+                for p, centre, maps in zip(packets, centres, view_maps)]
+
+
+def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
+                max_frames: int | None = None, hance: str = "auto", device: str = "cpu",
+                batch: int = 1) -> Iterator[DecodedFrame]:
+    """Decodes a stream frame by frame (networks batched over ``batch`` frames); every
+    complete frame before a damaged packet is yielded, then :class:`BitstreamError` names
+    the damaged frame."""
+    lo, hi = BATCH_RANGE
+    if not isinstance(batch, int) or not lo <= batch <= hi:
+        raise LFValueError(f"batch: an integer in {lo}..{hi}, got {batch!r}")
+    header = read_header(fh, limits)
+    dec = Decoder(header, depth=depth, occlusion=occlusion, hance=hance, device=device)
+    pending: list[Packet] = []
+    try:
+        for k, packet in enumerate(iter_packets(fh, header, limits)):
+            if max_frames is not None and k >= max_frames:
+                break
+            pending.append(packet)
+            if len(pending) >= batch:
+                yield from dec.decode_batch(pending)
+                pending = []
+    except BitstreamError:
+        # frames read before a damaged packet are still delivered, then the error
+        if pending:
+            yield from dec.decode_batch(pending)
+        raise
+    if pending:
+        yield from dec.decode_batch(pending)
+
+
+def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
+           hance: str = "auto", device: str = "cpu") -> np.ndarray:
+    """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8.
+
+    Raises:
+        LFStreamError: corrupt, truncated or hostile input (the error names the frame; the
+            frames decoded before the damage are in its ``partial`` attribute).
+    """
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise LFValueError(f"data: expected bytes, got {type(data).__name__}")
+    frames: list[np.ndarray] = []
+    try:
+        for f in iter_decode(io.BytesIO(bytes(data)), depth, occlusion, limits, hance=hance, device=device):
+            frames.append(f.lf)
+    except BitstreamError as exc:
+        exc.partial = np.stack(frames) if frames else None  # type: ignore[attr-defined]
+        raise
+    if not frames:
+        raise BitstreamError("stream holds no frames")
+    return np.stack(frames)
+
+
+def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | None = None,
+                hance: str = "auto", device: str = "cpu") -> tuple[np.ndarray, float]:
+    """Decodes an ``.lfs`` file; returns ``(lf, fps)``."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            header = read_header(fh)
+            fh.seek(0)
+            frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device)]
+    except OSError as exc:
+        raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    except BitstreamError as exc:
+        raise BitstreamError(f"{path}: {exc}") from exc
+    if not frames:
+        raise BitstreamError(f"{path}: stream holds no frames")
+    return np.stack(frames), header.fps
+
+
+def read_lfs(path: str | os.PathLike, max_frames: int | None = None) -> tuple[np.ndarray, float]:
+    """An ``.lfs`` file as a light field for the readers (:func:`lfstream.io.load_lf`):
+    decoded with flat disparity (every view is the decoded centre view)."""
+    return decode_file(path, depth="flat", max_frames=max_frames)
+
+
+__all__ = ["DEPTH_MODES", "HANCE_MODES", "HANCE_MAX_QUALITY", "BATCH_RANGE", "Decoder", "DecodedFrame", "decode",
+           "iter_decode", "decode_file", "read_lfs"]

@@ -1,0 +1,160 @@
+"""The encoder (seed chapter 3): per frame, the centre view as a JPEG; with the depth hint
+also the centre view's disparity (:mod:`lfstream.codec.hint`); per-view shading gains
+where the views differ in brightness (:mod:`lfstream.codec.shading`).
+
+Determinism: the same input and options give the same bytes (OpenCV's JPEG encoder,
+fixed zstd levels, sorted JSON metadata).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter
+from lfstream.codec.hint import HintOptions, encode_hint, estimate_disparity
+from lfstream.codec.jpeg import QUALITY_RANGE, encode_jpeg
+from lfstream.codec.shading import encode_gains, measure_gains, shading_present
+from lfstream.errors import LFStreamError, LFValueError
+from lfstream.io._fs import atomic_open
+from lfstream.lightfield import centre_view, check_finite, check_lf, to_uint8
+
+ENCODER_NAME = "lfstream-jpeg-centre"
+
+
+@dataclass
+class Encoder:
+    """Encodes LF frames into packets.
+
+    Attributes:
+        quality: JPEG quality of the centre view (1..100).
+        depth_hint: also send the encoder's disparity estimate.
+        hint_options: plane-sweep and coding options of the hint.
+    """
+
+    quality: int = 50
+    depth_hint: bool = False
+    hint_options: HintOptions = field(default_factory=HintOptions)
+    gain_grid: int = 4  # per-view brightness gains on a grid x grid mesh; 0 sends none
+
+    def __post_init__(self) -> None:
+        lo, hi = QUALITY_RANGE
+        if not isinstance(self.quality, (int, np.integer)) or not lo <= self.quality <= hi:
+            raise LFValueError(f"quality: an integer in {lo}..{hi}, got {self.quality!r}")
+        if not isinstance(self.gain_grid, (int, np.integer)) or not 0 <= self.gain_grid <= 64:
+            raise LFValueError(f"gain_grid: an integer in 0..64, got {self.gain_grid!r}")
+        self.hint_options.validate()
+
+    def header(self, views: tuple[int, int], size: tuple[int, int], fps: float) -> StreamHeader:
+        from lfstream import __version__
+
+        meta = {"encoder": ENCODER_NAME, "version": __version__, "quality": int(self.quality), "gain_grid": self.gain_grid}
+        if self.depth_hint:
+            meta["hint"] = {"max_disparity": self.hint_options.max_disparity, "steps": self.hint_options.steps,
+                            "hint_scale": self.hint_options.hint_scale}
+        return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint, meta=meta)
+
+    def encode_frame(self, lf: np.ndarray, seq: int, timestamp_us: int, present: np.ndarray | None = None) -> Packet:
+        """One ``(U, V, H, W, 3)`` frame (uint8, or float in [0, 1]) to a packet.
+
+        ``present`` marks the views that exist (a light field read with missing views); the
+        centre view must be among them. The decoder reconstructs every view.
+        """
+        check_lf(lf, allow_video=False)
+        if present is not None:
+            present = np.asarray(present, bool)
+            if present.shape != lf.shape[:2]:
+                raise LFValueError(f"frame {seq}: present mask {present.shape} does not match the views {lf.shape[:2]}")
+            if not present[lf.shape[0] // 2, lf.shape[1] // 2]:
+                raise LFValueError(f"frame {seq}: the centre view is missing; it is the view the codec sends")
+        if lf.shape[-1] != 3:
+            raise LFValueError(f"frame {seq}: expected 3 colour channels, got {lf.shape[-1]}")
+        check_finite(lf, f"frame {seq}")
+        frame = to_uint8(np.asarray(lf))
+        image = encode_jpeg(centre_view(frame), self.quality)
+        hint = b""
+        if self.depth_hint:
+            hint = encode_hint(estimate_disparity(frame, self.hint_options, present), self.hint_options)
+        gain = b""
+        if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1:
+            gains = measure_gains(frame, self.gain_grid, present=present)
+            gain = encode_gains(gains) if shading_present(gains) else b""
+        return Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
+
+
+@dataclass
+class EncodeStats:
+    """What :func:`encode_file` wrote."""
+
+    frames: int = 0
+    bytes: int = 0
+    image_bytes: int = 0
+    hint_bytes: int = 0
+    encode_s: float = 0.0
+
+    def add(self, packet: Packet, seconds: float) -> None:
+        self.frames += 1
+        self.image_bytes += len(packet.image)
+        self.hint_bytes += len(packet.hint)
+        self.encode_s += seconds
+
+
+def frames_of(lf: np.ndarray) -> np.ndarray:
+    """A frame ``(U, V, H, W, C)`` as a one-frame video; a video as it is (checked)."""
+    check_lf(lf)
+    return lf if lf.ndim == 6 else lf[None]
+
+
+def encode(
+    lf: np.ndarray,
+    quality: int = 50,
+    depth_hint: bool = False,
+    fps: float = 30.0,
+    hint_options: HintOptions | None = None,
+    gain_grid: int = 4,
+    present: np.ndarray | None = None,
+) -> bytes:
+    """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
+
+    ``present``: the ``(U, V)`` mask of views that exist, for light fields read with missing
+    views (the centre view must exist); the decoder reconstructs all views.
+
+    Raises:
+        LFStreamError: bad shape, dtype, non-finite values or parameters.
+    """
+    try:
+        frames = frames_of(np.asarray(lf) if not hasattr(lf, "numpy") else lf.cpu().numpy())
+    except (TypeError, ValueError, AttributeError) as exc:
+        if isinstance(exc, LFStreamError):
+            raise
+        raise LFValueError(f"lf: not an array ({exc})") from exc
+    enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid)
+    buf = io.BytesIO()
+    writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
+    for t, frame in enumerate(frames):
+        writer.write(enc.encode_frame(frame, t, int(round(t * 1e6 / fps)), present))
+    return buf.getvalue()
+
+
+def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tuple[int, int], size: tuple[int, int],
+                encoder: Encoder, fps: float = 30.0, present: np.ndarray | None = None) -> EncodeStats:
+    """Encodes frames into an ``.lfs`` file, written atomically; returns byte counts and timing."""
+    stats = EncodeStats()
+    with atomic_open(Path(path)) as fh:
+        writer = StreamWriter(fh, encoder.header(views, size, fps))
+        for t, frame in enumerate(frames):
+            t0 = time.perf_counter()
+            packet = encoder.encode_frame(frame, t, int(round(t * 1e6 / fps)), present)
+            stats.add(packet, time.perf_counter() - t0)
+            writer.write(packet)
+        stats.bytes = writer.bytes_written
+    return stats
+
+
+__all__ = ["ENCODER_NAME", "Encoder", "EncodeStats", "encode", "encode_file", "frames_of"]

@@ -1,0 +1,48 @@
+"""Light-field I/O: readers for every common layout, writers that never leave a torn file.
+
+- :mod:`~lfstream.io.readers`: :func:`load_lf` / :func:`read_lf` with :class:`ReadOptions`
+  (format detection, missing views, crops, flips).
+- :mod:`~lfstream.io.images`, :mod:`~lfstream.io.video`, :mod:`~lfstream.io.pfm`: single
+  images and lenslet images, mosaic videos (PyAV), disparity maps.
+- :mod:`~lfstream.io.writers`: :func:`write_lf`.
+- :mod:`~lfstream.io._fs`: atomic writes and fresh output folders, shared by every writer.
+"""
+
+from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image, write_image
+from lfstream.io.pfm import read_pfm, write_pfm
+from lfstream.io.readers import LoadedLF, ReadOptions, load_lf, read_lf
+from lfstream.io.video import (
+    GRID_METADATA_KEY,
+    GRID_METADATA_PREFIX,
+    VIDEO_EXTS,
+    VideoWriter,
+    grid_metadata,
+    iter_video_frames,
+    read_mosaic_video,
+    video_grid_and_fps,
+    write_video,
+)
+from lfstream.io.writers import write_lf
+
+__all__ = [
+    "IMAGE_EXTS",
+    "VIDEO_EXTS",
+    "GRID_METADATA_KEY",
+    "GRID_METADATA_PREFIX",
+    "ReadOptions",
+    "LoadedLF",
+    "VideoWriter",
+    "load_lf",
+    "read_lf",
+    "write_lf",
+    "read_image",
+    "write_image",
+    "read_eslf",
+    "read_mosaic_video",
+    "iter_video_frames",
+    "video_grid_and_fps",
+    "grid_metadata",
+    "write_video",
+    "read_pfm",
+    "write_pfm",
+]

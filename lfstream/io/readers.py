@@ -1,0 +1,429 @@
+"""Reading light fields and LF videos in every supported layout.
+
+Every reader returns arrays in the convention of :mod:`lfstream.lightfield`: a frame
+``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)``, uint8 for image and video sources,
+the stored dtype for ``.npy``/``.npz``.
+
+Formats are detected from the path:
+
+========================  =====================================================================
+``*.npy`` / ``*.npz``     one frame or a video (``.npz``: key ``lf``, optional ``disparity``)
+``*.lfs``                 an lfstream bitstream (decoded with flat disparity for ``info``)
+folder of images          ``R_C.png`` (0-based), ``input_CamNNN.png`` (HCI, ``NNN = row*n + col``),
+                          ``NAME_RR_CC.png`` (1-based, Lytro exports)
+single image              a lenslet/ESLF image (``angular=N``) or a mosaic (``grid=(U, V)``)
+video file                frames are SAI mosaics; grid from ``grid=`` or the file's metadata
+folder of videos          one video per view, named like the image folders
+folder of frames          sub-folders or files, each one LF frame in any format above
+``*.pfm``                 a disparity map (:func:`lfstream.io.read_pfm`), not a light field
+========================  =====================================================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError, LFValueError
+from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image
+from lfstream.io.video import VIDEO_EXTS, iter_video_frames, read_mosaic_video, video_grid_and_fps
+from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_lf, from_mosaic
+
+_RE_RC = re.compile(r"^(\d+)_(\d+)$")
+_RE_HCI = re.compile(r"^input_Cam(\d{3})$")
+_RE_LYTRO = re.compile(r"^(.*?)_(\d{2})_(\d{2})$")
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """How to interpret a light-field source (every reader takes the same options).
+
+    Attributes:
+        angular: microlens size in pixels of a lenslet (ESLF) image (Lytro Illum: 14; some
+            decoders write 15).
+        crop: keep the central ``crop x crop`` views.
+        grid: ``(U, V)`` of a mosaic image or mosaic video without stored metadata.
+        flip_u, flip_v: reverse the view rows / columns, for sources whose view order
+            disagrees with lfstream's (HCI) disparity convention.
+        allow_missing: load a folder with missing views, zero-filled, with ``present`` set;
+            without it missing views raise :class:`~lfstream.errors.LFMissingViewsError`.
+        max_frames: read at most this many frames of a video.
+    """
+
+    angular: int | None = None
+    crop: int | None = None
+    grid: tuple[int, int] | None = None
+    flip_u: bool = False
+    flip_v: bool = False
+    allow_missing: bool = False
+    max_frames: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.max_frames is not None and (not isinstance(self.max_frames, (int, np.integer)) or self.max_frames < 1):
+            raise LFValueError(f"max_frames: a positive integer, got {self.max_frames!r}")
+        if self.crop is not None and (not isinstance(self.crop, (int, np.integer)) or self.crop < 1):
+            raise LFValueError(f"crop: a positive integer, got {self.crop!r}")
+
+
+
+@dataclass
+class LoadedLF:
+    """A light field read from disk together with what the source said about it.
+
+    Attributes:
+        lf: ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``.
+        format: detected format name (``npy``, ``npz``, ``sai-folder``, ``eslf``, ``mosaic``,
+            ``video``, ``view-videos``, ``frames-folder``, ``lfs``).
+        path: the path read.
+        present: ``(U, V)`` bool mask of views that exist in the source, or ``None`` when
+            all are present. Missing views are zero in ``lf``.
+        weight: per-sample weight ``(U, V, H, W)`` float32 from a lenslet image's alpha
+            channel, or ``None``.
+        disparity: ground-truth disparity ``(U, V, H, W)`` or ``(T, U, V, H, W)`` if the
+            source carries one (``.npz`` from :mod:`lfstream.synth`).
+        fps: frame rate of video sources, else ``None``.
+    """
+
+    lf: np.ndarray
+    format: str
+    path: Path
+    present: np.ndarray | None = None
+    weight: np.ndarray | None = None
+    disparity: np.ndarray | None = None
+    fps: float | None = None
+
+    @property
+    def frames(self) -> int:
+        return int(self.lf.shape[0]) if self.lf.ndim == 6 else 1
+
+    @property
+    def views(self) -> tuple[int, int]:
+        return int(self.lf.shape[-5]), int(self.lf.shape[-4])
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return int(self.lf.shape[-3]), int(self.lf.shape[-2])
+
+
+def _view_name_index(stem: str) -> tuple[str, int, int, str] | None:
+    """Parses a view file stem into (scheme, row, col, prefix); row/col 0-based (HCI: linear)."""
+    m = _RE_HCI.match(stem)
+    if m:
+        return "hci", int(m.group(1)), -1, ""
+    m = _RE_RC.match(stem)
+    if m:
+        return "rc", int(m.group(1)), int(m.group(2)), ""
+    m = _RE_LYTRO.match(stem)
+    if m:
+        return "lytro", int(m.group(2)) - 1, int(m.group(3)) - 1, m.group(1)
+    return None
+
+
+def _scan_view_files(folder: Path, exts: Sequence[str]) -> tuple[str, dict[tuple[int, int], Path], tuple[int, int]]:
+    """Finds the view files of a folder and their grid positions; returns (scheme, map, grid)."""
+    entries: dict[str, list[tuple[int, int, Path]]] = {}
+    for p in sorted(folder.iterdir()):
+        if not p.is_file() or p.suffix.lower() not in exts:
+            continue
+        parsed = _view_name_index(p.stem)
+        if parsed is None:
+            continue
+        scheme, r, c, _prefix = parsed
+        entries.setdefault(scheme, []).append((r, c, p))
+    if not entries:
+        raise LFFormatError(
+            f"{folder}: no view files named R_C, input_CamNNN or NAME_RR_CC with extension in {list(exts)}"
+        )
+    if len(entries) > 1:
+        raise LFFormatError(f"{folder}: mixes view naming schemes {sorted(entries)}")
+    scheme, items = next(iter(entries.items()))
+    if scheme == "hci":
+        # HCI numbers views row-major on an n x n grid; infer n from the largest index.
+        top = max(r for r, _, _ in items)
+        n = int(np.ceil(np.sqrt(top + 1)))
+        views = {(r // n, r % n): p for r, _, p in items}
+        grid = (n, n)
+    else:
+        views = {}
+        for r, c, p in items:
+            if r < 0 or c < 0:
+                raise LFFormatError(f"{p}: view index out of range")
+            if (r, c) in views:
+                raise LFFormatError(f"{folder}: two files for view ({r}, {c}): {views[(r, c)].name}, {p.name}")
+            views[(r, c)] = p
+        grid = (max(r for r, _ in views) + 1, max(c for _, c in views) + 1)
+    if max(grid) > MAX_VIEWS_PER_AXIS:
+        raise LFFormatError(f"{folder}: view grid {grid} exceeds the limit of {MAX_VIEWS_PER_AXIS} per axis")
+    return scheme, views, grid
+
+
+def _missing_message(folder: Path, missing: list[tuple[int, int]], grid: tuple[int, int]) -> str:
+    shown = ", ".join(f"({r},{c})" for r, c in missing[:12])
+    more = f" and {len(missing) - 12} more" if len(missing) > 12 else ""
+    return (
+        f"{folder}: {len(missing)} of {grid[0] * grid[1]} views of the {grid[0]}x{grid[1]} grid are missing: "
+        f"{shown}{more} (pass allow_missing=True / --allow-missing to load the present views with a mask)"
+    )
+
+
+def _assemble_views(
+    folder: Path,
+    views: dict[tuple[int, int], object],
+    grid: tuple[int, int],
+    load_view,
+    allow_missing: bool,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    missing = [(r, c) for r in range(grid[0]) for c in range(grid[1]) if (r, c) not in views]
+    if missing and not allow_missing:
+        raise LFMissingViewsError(_missing_message(folder, missing, grid), missing)
+    lf: np.ndarray | None = None
+    ref_shape: tuple[int, ...] | None = None
+    ref_name = ""
+    for (r, c), src in sorted(views.items()):
+        img = load_view(src)
+        if lf is None:
+            ref_shape, ref_name = img.shape, str(src)
+            lf = np.zeros(img.shape[:-3] + (grid[0], grid[1]) + img.shape[-3:], np.uint8)
+        elif img.shape != ref_shape:
+            raise LFShapeError(f"{src}: view shape {img.shape} differs from {ref_name} {ref_shape}")
+        lf[..., r, c, :, :, :] = img
+    assert lf is not None
+    if not missing:
+        return lf, None
+    present = np.zeros(grid, bool)
+    for r, c in views:
+        present[r, c] = True
+    return lf, present
+
+
+def _read_rgb_view(p: Path) -> np.ndarray:
+    img = read_image(p)
+    return img[:, :, :3]
+
+
+def _read_array_file(path: Path) -> LoadedLF:
+    try:
+        if path.suffix.lower() == ".npy":
+            lf = np.load(path, allow_pickle=False)
+            disparity = None
+            fmt = "npy"
+        else:
+            with np.load(path, allow_pickle=False) as z:
+                keys = list(z.keys())
+                if not keys:
+                    raise LFFormatError(f"{path}: empty .npz archive")
+                key = "lf" if "lf" in keys else keys[0]
+                lf = z[key]
+                disparity = z["disparity"] if "disparity" in keys else None
+            fmt = "npz"
+    except (ValueError, OSError, EOFError) as exc:
+        if isinstance(exc, LFFormatError):
+            raise
+        raise LFFormatError(f"{path}: not a readable {path.suffix} array ({exc})") from exc
+    if not isinstance(lf, np.ndarray) or lf.dtype.kind not in "uf":
+        raise LFFormatError(f"{path}: expected a numeric array, got {getattr(lf, 'dtype', type(lf))}")
+    try:
+        check_lf(lf, name=str(path))
+    except LFShapeError as exc:
+        raise LFFormatError(str(exc)) from exc
+    return LoadedLF(lf=lf, format=fmt, path=path, disparity=disparity)
+
+
+def _classify_folder(folder: Path) -> str:
+    files = [p for p in folder.iterdir() if not p.name.startswith(".")]
+    if not files:
+        raise LFFormatError(f"{folder}: empty folder")
+    exts = {p.suffix.lower() for p in files if p.is_file()}
+    named = [p for p in files if p.is_file() and _view_name_index(p.stem) is not None]
+    if named and any(p.suffix.lower() in IMAGE_EXTS for p in named):
+        return "sai-folder"
+    if named and any(p.suffix.lower() in VIDEO_EXTS for p in named):
+        return "view-videos"
+    if any(p.is_dir() for p in files) or exts & {".npy", ".npz", ".lfs"} or exts & set(VIDEO_EXTS):
+        return "frames-folder"
+    raise LFFormatError(f"{folder}: no light-field files recognised (extensions found: {sorted(exts) or 'none'})")
+
+
+#: Formats whose decoder lives in a higher layer (the codec decodes ``.lfs``): imported by
+#: name only when such a file is read, so the I/O layer never imports the codec.
+_LAYERED_READERS = {".lfs": ("lfstream.codec.decoder", "read_lfs")}
+
+
+def _read_layered(path: Path, max_frames: int | None) -> LoadedLF:
+    import importlib
+
+    module, name = _LAYERED_READERS[path.suffix.lower()]
+    lf, fps = getattr(importlib.import_module(module), name)(path, max_frames=max_frames)
+    return LoadedLF(lf=lf, format=path.suffix.lower().lstrip("."), path=path, fps=fps)
+
+
+def load_lf(path: str | os.PathLike, options: ReadOptions | None = None, **kwargs) -> LoadedLF:
+    """Reads a light field (any supported format) together with its metadata.
+
+    Args:
+        path: file or folder; the format is detected (see the module docstring).
+        options: how to interpret the source (:class:`ReadOptions`); or its fields as
+            keyword arguments (``angular=14, crop=7, ...``).
+
+    Raises:
+        LFFileError: the path does not exist or cannot be read.
+        LFFormatError: the content is not a supported light field.
+    """
+    opts = dataclasses.replace(options or ReadOptions(), **kwargs) if kwargs else (options or ReadOptions())
+    path = Path(path)
+    if not path.exists():
+        raise LFFileError(f"{path}: no such file or folder")
+    crop = opts.crop
+    if path.is_dir():
+        loaded = _load_folder(path, opts)
+    else:
+        ext = path.suffix.lower()
+        if ext in (".npy", ".npz"):
+            loaded = _read_array_file(path)
+            if opts.max_frames is not None and loaded.lf.ndim == 6:
+                loaded.lf = loaded.lf[: opts.max_frames]
+        elif ext in _LAYERED_READERS:
+            loaded = _read_layered(path, opts.max_frames)
+        elif ext in VIDEO_EXTS:
+            lf, fps = read_mosaic_video(path, opts.grid, opts.max_frames)
+            loaded = LoadedLF(lf=lf, format="video", path=path, fps=fps)
+        elif ext in IMAGE_EXTS:
+            if opts.angular is not None:
+                lf, weight = read_eslf(path, opts.angular, crop)
+                crop = None  # already applied, on the weight too
+                loaded = LoadedLF(lf=lf, format="eslf", path=path, weight=weight)
+            elif opts.grid is not None:
+                lf = np.ascontiguousarray(from_mosaic(read_image(path)[:, :, :3], opts.grid))
+                loaded = LoadedLF(lf=lf, format="mosaic", path=path)
+            else:
+                raise LFFormatError(
+                    f"{path}: a single image is a lenslet image (pass angular=N / --angular N) "
+                    "or a mosaic (pass grid=(U, V) / --grid UxV)"
+                )
+        elif ext == ".pfm":
+            raise LFFormatError(f"{path}: a PFM file holds a disparity map, not a light field (use read_pfm)")
+        else:
+            raise LFFormatError(f"{path}: unknown light-field format {ext or '(no extension)'}")
+    if crop is not None:
+        _apply_crop(loaded, crop)
+    if opts.flip_u or opts.flip_v:
+        _apply_flips(loaded, opts.flip_u, opts.flip_v)
+    return loaded
+
+
+def _apply_crop(loaded: LoadedLF, k: int) -> None:
+    from lfstream.lightfield import crop_views
+
+    loaded.lf = np.ascontiguousarray(crop_views(loaded.lf, k))
+    u, v = loaded.lf.shape[-5:-3]
+    for name in ("present", "weight", "disparity"):
+        arr = getattr(loaded, name)
+        if arr is None:
+            continue
+        # present: (U, V); weight / disparity: (..., U, V, H, W)
+        ax = arr.ndim - 2 if name == "present" else arr.ndim - 4
+        full_u, full_v = arr.shape[ax], arr.shape[ax + 1]
+        su, sv = full_u // 2 - k // 2, full_v // 2 - k // 2
+        idx = [slice(None)] * arr.ndim
+        idx[ax], idx[ax + 1] = slice(su, su + k), slice(sv, sv + k)
+        setattr(loaded, name, np.ascontiguousarray(arr[tuple(idx)]))
+
+
+def _apply_flips(loaded: LoadedLF, flip_u: bool, flip_v: bool) -> None:
+    def flip(arr: np.ndarray, view_axis_u: int) -> np.ndarray:
+        axes = tuple(a for a, f in ((view_axis_u, flip_u), (view_axis_u + 1, flip_v)) if f)
+        return np.ascontiguousarray(np.flip(arr, axis=axes))
+
+    loaded.lf = flip(loaded.lf, loaded.lf.ndim - 5)
+    if loaded.present is not None:
+        loaded.present = flip(loaded.present, 0)
+    for name in ("weight", "disparity"):
+        arr = getattr(loaded, name)
+        if arr is not None:
+            setattr(loaded, name, flip(arr, arr.ndim - 4))
+    if loaded.disparity is not None and (flip_u != flip_v):
+        # Mirroring one view axis only would need a per-axis disparity; refuse to guess.
+        raise LFValueError("flip_u and flip_v must agree for a source with ground-truth disparity")
+    if loaded.disparity is not None:
+        loaded.disparity = -loaded.disparity
+
+
+def _load_folder(folder: Path, opts: ReadOptions) -> LoadedLF:
+    kind = _classify_folder(folder)
+    if kind == "sai-folder":
+        _, views, found_grid = _scan_view_files(folder, IMAGE_EXTS)
+        lf, present = _assemble_views(folder, views, opts.grid or found_grid, _read_rgb_view, opts.allow_missing)
+        return LoadedLF(lf=lf, format="sai-folder", path=folder, present=present)
+    if kind == "view-videos":
+        _, views, found_grid = _scan_view_files(folder, VIDEO_EXTS)
+
+        def load_video(p: Path) -> np.ndarray:
+            frames = list(iter_video_frames(p, opts.max_frames))
+            if not frames:
+                raise LFFormatError(f"{p}: contains no frames")
+            return np.stack(frames)  # (T, H, W, 3)
+
+        stacked, present = _assemble_views(folder, views, opts.grid or found_grid, load_video, opts.allow_missing)
+        # _assemble_views placed the grid axes before (H, W, 3): (T, U, V, H, W, 3) already.
+        _, fps = video_grid_and_fps(next(iter(views.values())))
+        return LoadedLF(lf=stacked, format="view-videos", path=folder, present=present, fps=fps)
+    # frames-folder: every entry one frame (or a clip), concatenated along T in name order.
+    entries = sorted(p for p in folder.iterdir() if not p.name.startswith("."))
+    parts: list[np.ndarray] = []
+    disps: list[np.ndarray] = []
+    fps = None
+    for p in entries:
+        if p.is_file() and p.suffix.lower() not in (".npy", ".npz", ".lfs") + VIDEO_EXTS:
+            continue
+        sub = load_lf(p, ReadOptions(angular=opts.angular, grid=opts.grid))
+        arr = sub.lf if sub.lf.ndim == 6 else sub.lf[None]
+        if parts and arr.shape[1:] != parts[0].shape[1:]:
+            raise LFShapeError(f"{p}: frame shape {arr.shape[1:]} differs from the first frame's {parts[0].shape[1:]}")
+        parts.append(arr)
+        if sub.disparity is not None:
+            disps.append(sub.disparity if sub.disparity.ndim == 5 else sub.disparity[None])
+        fps = fps or sub.fps
+        if opts.max_frames is not None and sum(len(a) for a in parts) >= opts.max_frames:
+            break
+    if not parts:
+        raise LFFormatError(f"{folder}: no light-field frames found")
+    lf = np.concatenate(parts)[: opts.max_frames]
+    disparity = np.concatenate(disps)[: len(lf)] if len(disps) == len(parts) else None
+    return LoadedLF(lf=lf, format="frames-folder", path=folder, disparity=disparity, fps=fps)
+
+
+def read_lf(
+    path: str | os.PathLike,
+    *,
+    angular: int | None = None,
+    crop: int | None = None,
+    grid: tuple[int, int] | None = None,
+    flip_u: bool = False,
+    flip_v: bool = False,
+    return_mask: bool = False,
+    max_frames: int | None = None,
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """Reads a light field; see :class:`ReadOptions` for the options and :func:`load_lf`.
+
+    Returns:
+        The light field ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``. With
+        ``return_mask=True``, a pair ``(lf, present)`` where ``present`` is the ``(U, V)`` bool
+        mask of views that exist (all True when none is missing); missing views are zero.
+        Without it, a folder with missing views raises :class:`LFMissingViewsError`.
+    """
+    opts = ReadOptions(angular=angular, crop=crop, grid=grid, flip_u=flip_u, flip_v=flip_v,
+                       allow_missing=return_mask, max_frames=max_frames)
+    loaded = load_lf(path, opts)
+    if not return_mask:
+        return loaded.lf
+    present = loaded.present if loaded.present is not None else np.ones(loaded.views, bool)
+    return loaded.lf, present
+
+
+__all__ = ["ReadOptions", "LoadedLF", "load_lf", "read_lf"]

@@ -1,0 +1,212 @@
+"""Video files through PyAV: mosaic LF videos and an incremental, atomic writer.
+
+A mosaic video stores each LF frame as its sub-aperture mosaic (views tiled row-major,
+:func:`lfstream.lightfield.to_mosaic`); the view grid is kept in the container's
+``comment`` tag as ``lfstream-grid=UxV``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterator, Sequence
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.errors import LFFileError, LFFormatError, LFShapeError, LFValueError
+from lfstream.io._fs import temp_sibling
+from lfstream.lightfield import from_mosaic
+
+VIDEO_EXTS = (".mp4", ".mkv", ".avi", ".mov", ".webm", ".nut")
+#: Metadata key a mosaic video stores its view grid under ("UxV").
+GRID_METADATA_KEY = "comment"
+GRID_METADATA_PREFIX = "lfstream-grid="
+
+
+def _parse_grid(value: str | None) -> tuple[int, int] | None:
+    if not value:
+        return None
+    m = re.search(re.escape(GRID_METADATA_PREFIX) + r"(\d+)x(\d+)", value)
+    return (int(m.group(1)), int(m.group(2))) if m else None
+
+
+def _open_container(path: Path):
+    import av
+
+    try:
+        return av.open(str(path))
+    except (av.error.FFmpegError, OSError) as exc:  # type: ignore[attr-defined]
+        raise LFFormatError(f"{path}: not a readable video ({exc})") from exc
+
+
+def iter_video_frames(path: Path, max_frames: int | None = None) -> Iterator[np.ndarray]:
+    """Yields the frames of a video file as uint8 RGB ``(H, W, 3)``."""
+    import av
+
+    with _open_container(path) as container:
+        if not container.streams.video:
+            raise LFFormatError(f"{path}: has no video stream")
+        stream = container.streams.video[0]
+        try:
+            for i, frame in enumerate(container.decode(stream)):
+                if max_frames is not None and i >= max_frames:
+                    break
+                yield frame.to_ndarray(format="rgb24")
+        except av.error.FFmpegError as exc:  # type: ignore[attr-defined]
+            raise LFFormatError(f"{path}: video decoding failed ({exc})") from exc
+
+
+def video_grid_and_fps(path: Path) -> tuple[tuple[int, int] | None, float | None]:
+    """Reads the view grid stored in a mosaic video's metadata and its frame rate."""
+    with _open_container(path) as container:
+        # Matroska upper-cases tag names, MP4 keeps them: look the key up case-insensitively.
+        tags = {k.lower(): v for k, v in container.metadata.items()}
+        if container.streams.video:
+            tags.update({k.lower(): v for k, v in container.streams.video[0].metadata.items()})
+        grid = _parse_grid(tags.get(GRID_METADATA_KEY))
+        fps = None
+        if container.streams.video and container.streams.video[0].average_rate:
+            fps = float(container.streams.video[0].average_rate)
+    return grid, fps
+
+
+def read_mosaic_video(
+    path: Path, grid: tuple[int, int] | None = None, max_frames: int | None = None
+) -> tuple[np.ndarray, float | None]:
+    """Reads a video whose frames are SAI mosaics; returns ``((T, U, V, H, W, 3), fps)``."""
+    stored, fps = video_grid_and_fps(path)
+    grid = grid or stored
+    if grid is None:
+        raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
+    frames = [from_mosaic(f, grid) for f in iter_video_frames(path, max_frames)]
+    if not frames:
+        raise LFFormatError(f"{path}: contains no frames")
+    return np.ascontiguousarray(np.stack(frames)), fps
+
+
+class VideoWriter:
+    """Incremental video writer (context manager): frames go in one by one, the file is
+    written under a temporary name and renamed when closed, so an interrupted write never
+    leaves a broken file and a closed one is always complete and playable.
+
+    Codecs by extension and ``lossless``: FFV1 (``.mkv``/``.avi``/``.nut``) or x264 RGB at
+    QP 0 (``.mp4``/``.mov``) when lossless; x264 (yuv420p, yuv444p for odd sizes) at ``crf``
+    otherwise; ``.gif`` an animated GIF.
+    """
+
+    def __init__(self, path: str | os.PathLike, fps: float = 30.0, lossless: bool = True, crf: int = 18,
+                 metadata: dict[str, str] | None = None, preset: str = "medium") -> None:
+        self.path = Path(path)
+        ext = self.path.suffix.lower()
+        if ext not in VIDEO_EXTS + (".gif",):
+            raise LFValueError(f"{self.path}: unsupported video extension; use one of {VIDEO_EXTS + ('.gif',)}")
+        self._ext, self._fps, self._lossless, self._crf = ext, fps, lossless, crf
+        self._metadata, self._preset = metadata or {}, preset
+        self._container = None
+        self._stream = None
+        self._size: tuple[int, int] | None = None
+        self._tmp = temp_sibling(self.path)
+        self.frames = 0
+
+    def _open(self, h: int, w: int) -> None:
+        import av
+
+        ext = self._ext
+        if ext == ".gif":
+            codec, pix_fmt, options = "gif", "rgb8", {}
+        elif self._lossless:
+            codec, pix_fmt, options = ("ffv1", "bgr0", {}) if ext in (".mkv", ".avi", ".nut") else (
+                "libx264rgb", "rgb24", {"qp": "0", "preset": "veryfast"})
+        else:
+            # 4:2:0 needs even sizes; odd-sized frames keep full chroma instead of being cropped.
+            pix_fmt = "yuv420p" if h % 2 == 0 and w % 2 == 0 else "yuv444p"
+            codec, options = "libx264", {"crf": str(self._crf), "preset": self._preset}
+        try:
+            self._container = av.open(str(self._tmp), mode="w")
+            for k, v in self._metadata.items():
+                self._container.metadata[k] = v
+            self._stream = self._container.add_stream(codec, rate=Fraction(self._fps).limit_denominator(1001),
+                                                      options=options)
+            self._stream.width, self._stream.height, self._stream.pix_fmt = w, h, pix_fmt
+        except (av.error.FFmpegError, OSError) as exc:  # type: ignore[attr-defined]
+            raise LFFileError(f"{self.path}: cannot open for writing ({exc})") from exc
+        self._size = (h, w)
+
+    def write(self, img: np.ndarray) -> None:
+        import av
+
+        if self._size is None:
+            self._open(img.shape[0], img.shape[1])
+        h, w = self._size
+        if img.shape != (h, w, 3) or img.dtype != np.uint8:
+            raise LFShapeError(f"{self.path}: every frame must be uint8 ({h}, {w}, 3), got {img.dtype} {img.shape}")
+        try:
+            frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(img), format="rgb24")
+            for packet in self._stream.encode(frame):
+                self._container.mux(packet)
+        except av.error.FFmpegError as exc:  # type: ignore[attr-defined]
+            raise LFFileError(f"{self.path}: video encoding failed ({exc})") from exc
+        self.frames += 1
+
+    def close(self) -> None:
+        """Flushes and renames into place (a writer that got no frames leaves nothing)."""
+        import av
+
+        if self._container is None:
+            return
+        try:
+            for packet in self._stream.encode():
+                self._container.mux(packet)
+            self._container.close()
+            os.replace(self._tmp, self.path)
+        except (av.error.FFmpegError, OSError) as exc:  # type: ignore[attr-defined]
+            raise LFFileError(f"{self.path}: video finalisation failed ({exc})") from exc
+        finally:
+            self._container = None
+            self._tmp.unlink(missing_ok=True)
+
+    def __enter__(self) -> "VideoWriter":
+        return self
+
+    def abort(self) -> None:
+        """Discards the file being written."""
+        if self._container is not None:
+            try:
+                self._container.close()
+            except Exception:  # the file is deleted anyway
+                pass
+            self._container = None
+        self._tmp.unlink(missing_ok=True)
+
+    def __exit__(self, exc_type, *exc) -> None:
+        # an exception inside the block discards the half-written file
+        self.abort() if exc_type is not None else self.close()
+
+
+def write_video(
+    path: Path,
+    frames: Sequence[np.ndarray] | np.ndarray,
+    fps: float = 30.0,
+    lossless: bool = True,
+    crf: int = 18,
+    metadata: dict[str, str] | None = None,
+) -> None:
+    """Writes uint8 RGB frames ``(T, H, W, 3)`` to a video file through PyAV (see
+    :class:`VideoWriter` for codecs and the atomic rename)."""
+    path = Path(path)
+    if len(frames) == 0:
+        raise LFValueError(f"{path}: no frames to write")
+    with VideoWriter(path, fps, lossless, crf, metadata) as writer:
+        for img in frames:
+            writer.write(img)
+
+
+def grid_metadata(views: tuple[int, int]) -> dict[str, str]:
+    """The container metadata that records a mosaic video's view grid."""
+    return {GRID_METADATA_KEY: f"{GRID_METADATA_PREFIX}{views[0]}x{views[1]}"}
+
+
+__all__ = ["VIDEO_EXTS", "GRID_METADATA_KEY", "GRID_METADATA_PREFIX", "VideoWriter", "write_video", "iter_video_frames",
+           "video_grid_and_fps", "read_mosaic_video", "grid_metadata"]

@@ -1,0 +1,86 @@
+"""What a stream does: :class:`StreamConfig` and the choices and ranges of its fields.
+
+The CLI takes its choices and ranges from here (and from :mod:`lfstream.codec`), so a flag
+and the library can never disagree. This module imports neither torch nor numba.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
+from lfstream.codec.jpeg import QUALITY_RANGE
+from lfstream.errors import LFValueError
+from lfstream.optics import SEED_ALPHAS
+
+REFOCUS_MODES = ("auto", "refnet", "sas", "fourier", "none")
+TRANSPORTS = ("inproc", "file", "tcp")
+SAVE_KINDS = ("mp4", "png", "sweep", "lf")
+#: Frames per network batch in the stream's decoder, and bounded-queue sizes.
+BATCH_RANGE = (1, 64)
+QUEUE_RANGE = (1, 256)
+
+
+def check_range(name: str, value: float, bounds: tuple[float, float], integer: bool = True) -> None:
+    """Raises :class:`LFValueError` naming ``name`` unless ``value`` lies in ``bounds``."""
+    lo, hi = bounds
+    ok = isinstance(value, int) if integer else isinstance(value, (int, float))
+    if not ok or not lo <= value <= hi:
+        raise LFValueError(f"{name}: {'an integer' if integer else 'a number'} in {lo}..{hi}, got {value!r}")
+
+
+def check_choice(name: str, value: str, choices: tuple[str, ...]) -> None:
+    """Raises :class:`LFValueError` naming ``name`` unless ``value`` is one of ``choices``."""
+    if value not in choices:
+        raise LFValueError(f"{name}: one of {', '.join(choices)}, got {value!r}")
+
+
+@dataclass
+class StreamConfig:
+    """What the pipeline does (the CLI's flags map onto these fields)."""
+
+    quality: int = 50
+    depth_hint: bool = True
+    depth: str = "auto"
+    hance: str = "auto"
+    refocus: str = "auto"
+    alphas: tuple[float, ...] = SEED_ALPHAS
+    batch: int = 1
+    device: str = "cpu"
+    queue_size: int = 4
+    transport: str = "inproc"
+    save: tuple[str, ...] = ("mp4",)
+    skip_static: bool = True
+    static_threshold: float = 0.5
+    # off by default: measured on 7x7x375x540, the half-resolution path is no faster than the
+    # numba SaS of the same planes (resizing 49 views costs what it saves); see the summary
+    skip_planes: bool = False
+    plane_margin: float = 0.5
+    mssim_every: int = 10
+    metrics: bool = True
+    sink_delay_s: float = 0.0  # an artificially slow sink (backpressure benchmarks)
+    fps: float = 30.0
+
+    def validate(self) -> None:
+        """Raises :class:`LFValueError` naming the first field out of its range."""
+        check_range("quality", self.quality, QUALITY_RANGE)
+        check_choice("depth", self.depth, DEPTH_MODES)
+        check_choice("hance", self.hance, HANCE_MODES)
+        check_choice("refocus", self.refocus, REFOCUS_MODES)
+        check_choice("transport", self.transport, TRANSPORTS)
+        bad = [s for s in self.save if s not in SAVE_KINDS]
+        if bad:
+            raise LFValueError(f"save: each of {', '.join(SAVE_KINDS)}, got {bad}")
+        check_range("batch", self.batch, BATCH_RANGE)
+        check_range("queue size", self.queue_size, QUEUE_RANGE)
+        if self.mssim_every < 0 or self.static_threshold < 0 or self.sink_delay_s < 0:
+            raise LFValueError("mssim_every, static_threshold and sink_delay_s must be >= 0")
+        if not 0 < self.fps <= 10000:
+            raise LFValueError(f"fps: in (0, 10000], got {self.fps!r}")
+        from lfstream.models.device import check_device
+
+        check_device(self.device)
+
+
+__all__ = ["StreamConfig", "REFOCUS_MODES", "TRANSPORTS", "SAVE_KINDS", "BATCH_RANGE", "QUEUE_RANGE", "check_range",
+           "check_choice"]

@@ -1,0 +1,193 @@
+"""The streaming pipeline: Producer -> Encoder -> Transport -> Decoder -> Refocus -> Sink.
+
+Each stage runs in its own thread (the heavy work — OpenCV, numba kernels, torch — releases
+the GIL) and stages are joined by bounded queues, so a slow sink throttles the producer
+and memory stays bounded. A ``Metrics`` stage beside the sink compares each decoded frame
+with the input frame the producer read (MPSNR every frame; MSSIM every ``mssim_every``
+frames: it costs ~2 s per 7x7x375x540 frame).
+
+Skips (each switchable, each reported in the summary with what it saved and cost):
+  (a) ``skip_static``: a frame whose decoded centre view differs from the previous one by
+      less than ``static_threshold`` (mean absolute 8-bit levels) reuses the previous
+      frame's disparity (no hint decoding / Depth-Net);
+  (b) ``skip_planes`` (off by default, see :class:`StreamConfig`): focal planes whose slope lies outside the scene's disparity range
+      (1st..99th percentile of the decoded disparity, widened by ``plane_margin``) are
+      rendered by a cheap path (shift-and-sum at half resolution, upsampled) and flagged;
+  (c) JPEG-Hance runs only at JPEG qualities where it was measured to help (the decoder's
+      ``hance="auto"``);
+  (d) rendering the focal stack straight from centre view + disparity is not offered: it
+      needs one remap per view and plane (16 x 49 for 7x7), against 49 remaps plus the
+      fused shift-and-sum; from the measured parts (49 remaps ~60 ms, SaS 16 planes
+      ~164 ms at 7x7x375x540) that is ~1 s against ~0.22 s. Not measured directly.
+
+The stages live in :mod:`lfstream.stream.stages`, each owning its statistics; this module
+wires them: channels, queues, threads, and the summary. An error in any stage stops the
+pipeline and raises :class:`PipelineError` naming the stage and frame;
+:meth:`Pipeline.stop` (Ctrl-C in the CLI) stops every stage within a fraction of a second
+and the sink finalises every file it opened.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.stream.config import StreamConfig
+from lfstream.stream.report import PlaneSkipStats, QualityStats, RateStats, StageStats, StaticSkipStats, build_summary
+from lfstream.stream.sinks import Sink
+from lfstream.stream.stages import (
+    DecoderStage,
+    EncoderStage,
+    MetricsStage,
+    OriginalFrames,
+    PipelineError,
+    ProducerStage,
+    RefocusStage,
+    RunControl,
+    SinkStage,
+)
+from lfstream.stream.transport import FileChannel, InprocChannel, LazyTcpSender, Receiver, Sender, TcpReceiver
+
+STAGE_NAMES = ("producer", "encoder", "decoder", "refocus", "sink", "metrics")
+
+
+class Pipeline:
+    """Runs the stages of one stream; see the module docstring.
+
+    Args:
+        source: iterator of ``(U, V, H, W, 3)`` uint8 frames (``None`` with ``receiver``).
+        config: what to do.
+        out: output folder of the sink (``None``: nothing written).
+        sender: for ``lfstream stream --to``: a connected :class:`~lfstream.stream.transport.TcpSender`;
+            the pipeline then ends at the transport.
+        receiver: for ``lfstream serve``: a :class:`~lfstream.stream.transport.TcpReceiver`; the
+            pipeline then starts at the transport.
+        progress: a callable given a status line about twice a second.
+        stream_file: the ``.lfs`` file of ``transport="file"``.
+
+    Attributes:
+        stats: per stage name, its :class:`~lfstream.stream.report.StageStats` (live while running).
+    """
+
+    def __init__(self, source: Iterator[np.ndarray] | None, config: StreamConfig, out: Path | None = None,
+                 sender: Sender | None = None, receiver: Receiver | None = None,
+                 progress: Callable[[str], None] | None = None, stream_file: Path | None = None) -> None:
+        config.validate()
+        self.config = config
+        self.source = source
+        self.out = out
+        self.sender = sender
+        self.receiver = receiver
+        self.progress = progress
+        self.stream_file = stream_file
+        self.control = RunControl()
+        self.stats = {name: StageStats(name) for name in STAGE_NAMES}
+        self.interrupted = False
+        self.queues: dict[str, queue.Queue] = {}
+
+    def stop(self) -> None:
+        """Stops every stage (Ctrl-C); the run then reports ``interrupted``."""
+        self.interrupted = True
+        self.control.stop_event.set()
+
+    def _channels(self) -> tuple[Sender | None, Receiver | None]:
+        cfg = self.config
+        if self.receiver is not None:
+            return None, self.receiver
+        if self.sender is not None:
+            return self.sender, None
+        if cfg.transport == "file":
+            channel = FileChannel(self.stream_file)
+            return channel, channel
+        if cfg.transport == "tcp":
+            # loopback TCP: the sender connects when the encoder sends the stream header
+            receiver = TcpReceiver("127.0.0.1", 0)
+            return LazyTcpSender(*receiver.address), receiver
+        channel = InprocChannel(cfg.queue_size)
+        return channel, channel
+
+    def run(self) -> dict:
+        """Runs the stream to its end (or a stop) and returns the summary.
+
+        Raises:
+            PipelineError: a stage failed (after every stage has stopped and the outputs
+                written so far are finalised).
+        """
+        cfg, ctl = self.config, self.control
+        t_start = time.perf_counter()
+        send_channel, recv_channel = self._channels()
+        qs = cfg.queue_size
+        self.queues = {name: queue.Queue(qs) for name in ("encode", "refocus", "sink", "metrics")}
+        want_metrics = cfg.metrics and self.source is not None and self.sender is None
+        originals = OriginalFrames() if want_metrics else None
+        stages = []
+        encoder = decoder = refocus = sink = metrics = None
+        if self.source is not None:
+            stages.append(ProducerStage(ctl, self.stats["producer"], self.source, self.queues["encode"], originals))
+            encoder = EncoderStage(ctl, self.stats["encoder"], self.queues["encode"], send_channel, cfg,
+                                   expect_frames=self.sender is None)
+            stages.append(encoder)
+        if self.sender is None:
+            decoder = DecoderStage(ctl, self.stats["decoder"], recv_channel, self.queues["refocus"], cfg)
+            refocus = RefocusStage(ctl, self.stats["refocus"], self.queues["refocus"], self.queues["sink"], cfg)
+            sink = SinkStage(ctl, self.stats["sink"], self.queues["sink"], self.queues["metrics"] if want_metrics else None,
+                             Sink(self.out, cfg) if self.out is not None else None, cfg.sink_delay_s)
+            stages += [decoder, refocus, sink]
+            if want_metrics:
+                metrics = MetricsStage(ctl, self.stats["metrics"], self.queues["metrics"], originals, cfg)
+                stages.append(metrics)
+        threads = [threading.Thread(target=s.run, name=s.name, daemon=True) for s in stages]
+        for t in threads:
+            t.start()
+        last = 0.0
+        try:
+            while any(t.is_alive() for t in threads):
+                for t in threads:
+                    t.join(timeout=0.05)
+                if self.progress is not None and time.perf_counter() - last > 0.5:
+                    last = time.perf_counter()
+                    self.progress(self.status_line(last - t_start))
+        except KeyboardInterrupt:
+            self.stop()
+            deadline = time.perf_counter() + 1.5
+            for t in threads:
+                t.join(timeout=max(0.0, deadline - time.perf_counter()))
+        wall = time.perf_counter() - t_start
+        if ctl.error is not None:
+            raise ctl.error
+        refocuser = refocus.refocuser if refocus is not None else None
+        receive = recv_channel.stats.as_dict() if recv_channel is not None else None
+        return build_summary(
+            wall_s=wall,
+            frames=self.stats["sink"].frames if self.sender is None else self.stats["encoder"].frames,
+            stages=self.stats,
+            rate=encoder.rate if encoder is not None else RateStats(),
+            quality=metrics.quality if metrics is not None else QualityStats(),
+            static=decoder.static if decoder is not None else StaticSkipStats(enabled=cfg.skip_static),
+            planes=refocuser.skips if refocuser is not None else PlaneSkipStats(enabled=cfg.skip_planes),
+            receive=receive,
+            transport="tcp" if self.sender is not None or self.receiver is not None else cfg.transport,
+            refocus={"method": refocuser.method, "why": refocuser.reason} if refocuser is not None else None,
+            hance={"mode": cfg.hance, "ran": bool(decoder is not None and decoder.decoder is not None
+                                                  and decoder.decoder.uses_hance)},
+            interrupted=self.interrupted,
+            outputs=sink.sink.files if sink is not None and sink.sink is not None else [],
+        )
+
+    def status_line(self, elapsed: float) -> str:
+        """One line: elapsed time, frames and rate per stage, queue fill."""
+        parts = [f"{elapsed:6.1f} s"]
+        for name in ("producer", "encoder", "decoder", "refocus", "sink"):
+            s = self.stats[name]
+            if s.frames:
+                parts.append(f"{name[:3]} {s.frames} ({s.frames / max(elapsed, 1e-9):.1f}/s)")
+        parts.append("queues " + " ".join(f"{k[:3]} {q.qsize()}/{q.maxsize}" for k, q in self.queues.items()))
+        return " | ".join(parts)
+
+
+__all__ = ["Pipeline", "PipelineError", "STAGE_NAMES"]

@@ -1,0 +1,105 @@
+"""The refocus stage's renderer: picks the focal-stack method and applies skip (b)."""
+
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+
+from lfstream.codec.decoder import DecodedFrame
+from lfstream.errors import LFValueError
+from lfstream.optics import SEED_ALPHAS, slopes_from_alphas
+from lfstream.stream.config import StreamConfig
+from lfstream.stream.report import PlaneSkipStats
+
+
+class Refocuser:
+    """Renders the focal stack of decoded frames with the chosen method and skip (b)."""
+
+    def __init__(self, config: StreamConfig, views: tuple[int, int]) -> None:
+        self.config = config
+        self.views = views
+        self.slopes = slopes_from_alphas(config.alphas)
+        self.method = config.refocus
+        self.reason = "requested"
+        self.skips = PlaneSkipStats(enabled=config.skip_planes)
+
+    def _refnet_applicable(self) -> bool:
+        from lfstream.models.registry import manifest_entry
+
+        entry = manifest_entry("refnet", "fast")
+        return (entry is not None and tuple(entry["config"]["views"]) == tuple(self.views)
+                and np.allclose(self.config.alphas, SEED_ALPHAS))
+
+    def choose(self, lf: np.ndarray) -> None:
+        """``auto``: RefNet when it is applicable, faster than SaS on this device and within
+        30 dB PSNR of SaS on this frame; otherwise SaS (measured on the first frame)."""
+        from lfstream.metrics import psnr
+        from lfstream.refocus import focal_stack
+
+        if self.method != "auto":
+            if self.method == "refnet" and not self._refnet_applicable():
+                raise LFValueError("refocus=refnet: the shipped RefNet takes 7x7 views and the seed's 16 alphas")
+            return
+        if not self._refnet_applicable():
+            self.method, self.reason = "sas", "RefNet not applicable (grid or alphas differ from its training)"
+            return
+        t0 = time.perf_counter()
+        ref = focal_stack(lf, self.config.alphas)
+        t_sas = time.perf_counter() - t0
+        focal_stack(lf, method="refnet", device=self.config.device)  # warm-up
+        t0 = time.perf_counter()
+        net = focal_stack(lf, method="refnet", device=self.config.device)
+        t_net = time.perf_counter() - t0
+        err = float(np.mean(psnr(ref, net)))
+        if t_net < t_sas and err >= 30.0:
+            self.method = "refnet"
+        else:
+            self.method = "sas"
+        self.reason = (f"measured on frame 0 ({self.config.device}): SaS {t_sas * 1e3:.0f} ms, RefNet {t_net * 1e3:.0f} ms "
+                       f"at {err:.1f} dB vs SaS")
+
+    def render(self, f: DecodedFrame) -> tuple[np.ndarray | None, list[int]]:
+        """The focal stack ``(K, H, W, 3)`` uint8 of a decoded frame and the planes rendered cheaply."""
+        from lfstream.refocus import focal_stack
+
+        if self.method == "none":
+            return None, []
+        lf = f.lf
+        if self.method in ("refnet", "fourier") or not self.config.skip_planes:
+            extra = {"device": self.config.device} if self.method == "refnet" else {}
+            return focal_stack(lf, self.config.alphas, method=self.method, **extra), []
+        d = f.disparity
+        lo, hi = (np.percentile(d, [1, 99]) if d.size else (0.0, 0.0))
+        margin = self.config.plane_margin
+        inside = (self.slopes >= lo - margin) & (self.slopes <= hi + margin)
+        out = np.empty((len(self.slopes), *lf.shape[2:]), np.uint8)
+        if inside.any():
+            out[inside] = focal_stack(lf, slopes=self.slopes[inside])
+        cheap = np.flatnonzero(~inside).tolist()
+        if cheap:
+            h, w = lf.shape[2:4]
+            t0 = time.perf_counter()
+            small = np.stack([[cv2.resize(view, (max(1, w // 2), max(1, h // 2)), interpolation=cv2.INTER_AREA)
+                               for view in row] for row in lf])
+            rough = focal_stack(small, slopes=self.slopes[~inside] / 2.0)
+            for k, img in zip(cheap, rough):
+                out[k] = cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR)
+            t_cheap = time.perf_counter() - t0
+            sk = self.skips
+            if sk.error_db is None:
+                # audit once: the exact planes, to report the error and time the skip costs/saves
+                from lfstream.metrics import psnr
+
+                t0 = time.perf_counter()
+                exact = focal_stack(lf, slopes=self.slopes[~inside])
+                t_exact = time.perf_counter() - t0
+                sk.error_db = float(np.mean(np.minimum(psnr(exact, out[cheap]), 100.0)))
+                sk.saved_per_plane_s = max(t_exact - t_cheap, 0.0) / len(cheap)
+            sk.planes += len(cheap)
+            sk.saved_s += (sk.saved_per_plane_s or 0.0) * len(cheap)
+        return out, cheap
+
+
+__all__ = ["Refocuser"]

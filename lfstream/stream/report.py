@@ -1,0 +1,134 @@
+"""What a stream run reports: typed statistics each stage owns, and the summary built
+from them once every stage has finished (no field is written by two threads)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.io._fs import atomic_write_text
+
+
+@dataclass
+class StageStats:
+    """Frames a stage handled and the time it was busy (its own thread writes it)."""
+
+    name: str
+    frames: int = 0
+    busy_s: float = 0.0
+
+    def add(self, frames: int, seconds: float) -> None:
+        self.frames += frames
+        self.busy_s += seconds
+
+    def as_dict(self) -> dict:
+        return {"frames": self.frames, "time_s": round(self.busy_s, 4),
+                "ms_per_frame": round(1e3 * self.busy_s / self.frames, 2) if self.frames else None,
+                "fps": round(self.frames / self.busy_s, 2) if self.busy_s > 0 else None}
+
+
+@dataclass
+class RateStats:
+    """Bytes the encoder produced (encoder thread)."""
+
+    bytes: int = 0
+    pixels: int = 0
+    frame_bpp: dict[int, float] = field(default_factory=dict)
+
+    def add(self, seq: int, n_bytes: int, pixels: int) -> None:
+        self.bytes += n_bytes
+        self.pixels += pixels
+        self.frame_bpp[seq] = n_bytes * 8 / float(pixels)
+
+
+@dataclass
+class StaticSkipStats:
+    """Skip (a): frames whose disparity was reused (decoder thread)."""
+
+    enabled: bool
+    frames: int = 0
+    saved_s: float = 0.0
+    error_db: float | None = None  # the first skip, audited against a full decode
+    full_decode_s: float = 0.0  # a full decode's time, measured at that audit
+
+    def as_dict(self) -> dict:
+        return {"enabled": self.enabled, "frames": self.frames, "saved_s": round(self.saved_s, 4),
+                "error_mpsnr_db_vs_full": self.error_db}
+
+
+@dataclass
+class PlaneSkipStats:
+    """Skip (b): focal planes outside the scene's disparity range rendered cheaply (refocus thread)."""
+
+    enabled: bool
+    planes: int = 0
+    saved_s: float = 0.0
+    error_db: float | None = None  # audited once against the exact planes
+    saved_per_plane_s: float | None = None
+
+    def as_dict(self) -> dict:
+        return {"enabled": self.enabled, "planes": self.planes, "saved_s": round(self.saved_s, 4),
+                "error_psnr_db_vs_exact": self.error_db}
+
+
+@dataclass
+class QualityStats:
+    """Decoded frames against the input (metrics thread)."""
+
+    mpsnr: list[tuple[int, float]] = field(default_factory=list)
+    mssim: list[tuple[int, float]] = field(default_factory=list)
+    stack_psnr: dict[int, float] = field(default_factory=dict)
+
+
+def build_summary(*, wall_s: float, frames: int, stages: dict[str, StageStats], rate: RateStats,
+                  quality: QualityStats, static: StaticSkipStats, planes: PlaneSkipStats,
+                  receive: dict | None, transport: str, refocus: dict | None, hance: dict,
+                  interrupted: bool, outputs: list[str]) -> dict:
+    """The summary a run returns and writes as ``summary.json`` (keys are a contract)."""
+    out = {
+        "frames": frames,
+        "fps": round(frames / wall_s, 3) if wall_s > 0 else None,
+        "wall_s": round(wall_s, 3),
+        "bpp": (rate.bytes * 8 / rate.pixels) if rate.pixels else None,
+        "bytes": rate.bytes,
+        "mpsnr": float(np.mean([p for _, p in quality.mpsnr])) if quality.mpsnr else None,
+        "mssim": float(np.mean([s for _, s in quality.mssim])) if quality.mssim else None,
+        "per_frame": [{"frame": k, "mpsnr": round(p, 4)} for k, p in quality.mpsnr],
+        "mssim_frames": [k for k, _ in quality.mssim],
+        "stages": {k: v.as_dict() for k, v in stages.items() if v.frames},
+        "lost": receive["lost"] if receive else 0,
+        "transport": {"kind": transport, **(receive or {})},
+        "refocus": refocus,
+        "skips": {"static_frames": static.as_dict(), "out_of_range_planes": planes.as_dict(), "jpeg_hance": hance},
+        "interrupted": interrupted,
+        "outputs": outputs,
+    }
+    ssim_of = dict(quality.mssim)
+    for row in out["per_frame"]:
+        k = row["frame"]
+        if k in rate.frame_bpp:
+            row["bpp"] = round(rate.frame_bpp[k], 6)
+        if k in ssim_of:
+            row["mssim"] = round(ssim_of[k], 6)
+        if k in quality.stack_psnr:
+            row["stack_psnr"] = round(quality.stack_psnr[k], 4)
+    return out
+
+
+def write_summary(out: Path, summary: dict) -> None:
+    """``summary.json`` in ``out``, written atomically."""
+    atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=2, default=str))
+
+
+def stderr_progress(line: str) -> None:
+    """A status line rewritten in place on stderr."""
+    sys.stderr.write("\r" + line[:200].ljust(120))
+    sys.stderr.flush()
+
+
+__all__ = ["StageStats", "RateStats", "StaticSkipStats", "PlaneSkipStats", "QualityStats", "build_summary",
+           "write_summary", "stderr_progress"]
