@@ -18,6 +18,7 @@ demo: $(STAMP)
 	$(BIN)/lfstream stream
 
 test: $(STAMP)
+	$(BIN)/ruff check .
 	$(BIN)/python -m pytest tests
 
 bench: $(STAMP)

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-
 from _harness import ROOT, emit, parser, timeit
 
 import lfstream
@@ -121,7 +120,8 @@ def plot_rd(rd: dict, path: Path) -> None:
     for k in range(5):
         lx = x0 + k * (x1 - x0) / 4
         ly = y0 + k * (y1 - y0) / 4
-        cv2.putText(img, f"{10 ** lx:.3g}", (m + int(k * (w - 2 * m) / 4) - 20, h - m + 20), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
+        cv2.putText(img, f"{10 ** lx:.3g}", (m + int(k * (w - 2 * m) / 4) - 20, h - m + 20), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.45, (0, 0, 0), 1)
         cv2.putText(img, f"{ly:.1f}", (10, h - m - int(k * (h - 2 * m) / 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
     cv2.putText(img, f"{rd['lf']}: MPSNR (dB) vs bits per pixel (log)", (m, 40), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 1)
     colours = [(200, 60, 20), (20, 140, 20), (20, 20, 200), (160, 20, 160)]

@@ -16,20 +16,19 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-
 from _harness import ROOT, emit, parser, timeit
 
 import lfstream
 from lfstream.codec import jpeg_roundtrip as jpeg
 from lfstream.codec.hint import HintOptions, decode_hint, encode_hint, estimate_disparity
-from lfstream.models.depth_net import predict_view_disparities
+from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.lightfield import to_network_input
 from lfstream.metrics import capped, mpsnr, mssim, psnr, ssim
-from lfstream.refocus import focal_stack
+from lfstream.models.depth_net import predict_view_disparities
 from lfstream.models.jpeg_hance import restore_images
-from lfstream.synth import synth_clip
-from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.models.registry import load_model, manifest_entry
+from lfstream.refocus import focal_stack
+from lfstream.synth import synth_clip
 
 SHARED = ROOT.parent / "shared" / "data"
 

@@ -16,15 +16,14 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-
 from _harness import ROOT, emit, parser, timeit
 
 import lfstream
 from lfstream.codec import Decoder, Encoder, decode
 from lfstream.codec.bitstream import read_header
 from lfstream.metrics import capped, mpsnr
-from lfstream.stream import Pipeline, StreamConfig
 from lfstream.refocus import focal_stack
+from lfstream.stream import Pipeline, StreamConfig
 from lfstream.synth import synth_clip
 
 
@@ -105,7 +104,8 @@ def plot(points: list[dict], path) -> None:
     ys = [p["mpsnr"] for p in points]
     x0, x1, y0, y1 = xs.min() - 0.1, xs.max() + 0.1, min(ys) - 1, max(ys) + 1
     cv2.rectangle(img, (m, m), (w - m, h - m), (0, 0, 0), 1)
-    cv2.putText(img, "seahorse: decoder MPSNR (dB) vs decode time (ms, log)", (m, 40), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 1)
+    cv2.putText(img, "seahorse: decoder MPSNR (dB) vs decode time (ms, log)", (m, 40), cv2.FONT_HERSHEY_SIMPLEX, 0.55,
+                (0, 0, 0), 1)
     for p, x, y in zip(points, xs, ys):
         px = int(m + (x - x0) / (x1 - x0) * (w - 2 * m))
         py = int(h - m - (y - y0) / (y1 - y0) * (h - 2 * m))

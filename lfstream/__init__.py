@@ -11,7 +11,10 @@ The packages follow the data flow: :mod:`lfstream.io` (read and write light fiel
 :mod:`lfstream.cli` on top. ``import lfstream`` imports neither torch nor numba.
 """
 
-from lfstream.errors import (
+from lfstream import errors
+
+# the exception hierarchy is public API; __all__ takes the names from errors.__all__
+from lfstream.errors import (  # noqa: F401 - public, listed through errors.__all__
     BitstreamError,
     LFFileError,
     LFFormatError,
@@ -37,14 +40,7 @@ def __getattr__(name: str):
 
 __all__ = [
     "__version__",
-    "LFStreamError",
-    "LFValueError",
-    "LFShapeError",
-    "LFFileError",
-    "LFFormatError",
-    "LFMissingViewsError",
-    "BitstreamError",
-    "WeightsError",
+    *errors.__all__,
     "ReadOptions",
     "read_lf",
     "load_lf",

@@ -14,9 +14,9 @@ every view, in pixels per view step.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Iterator
 
 import cv2
 import numpy as np

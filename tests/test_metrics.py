@@ -5,7 +5,7 @@ import pytest
 import torch
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
-from lfstream.errors import LFShapeError
+from lfstream.errors import LFShapeError, LFValueError
 from lfstream.metrics import bpp, dof_psnr, mpsnr, mssim, psnr, ssim
 from tests.conftest import random_lf, shared
 
@@ -95,5 +95,5 @@ def test_bjontegaard_deltas():
     # B is 1 dB better at every rate
     assert bd_psnr(rates, psnrs, rates, psnrs + 1) == pytest.approx(1.0, abs=1e-9)
     assert bd_rate(rates, psnrs, rates, psnrs) == pytest.approx(0.0, abs=1e-9)
-    with pytest.raises(Exception):
+    with pytest.raises(LFValueError):
         bd_rate(rates[:3], psnrs[:3], rates, psnrs)

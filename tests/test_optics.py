@@ -21,7 +21,7 @@ from lfstream.optics import (
     refocus_plane,
     slope_for_distance,
 )
-from tests.conftest import random_lf, shared, shifted_views
+from tests.conftest import shared, shifted_views
 
 # Seed Table 2.1 (F = 100 mm, f/2, 500 x 500 microlenses, focused at infinity): (N, a, near, far)
 TABLE_2_1 = [(25, 0.1, 13.6, 35.7), (25, 0.2, 8.1, 13.2), (25, 0.3, 5.7, 8.1), (25, 0.4, 4.5, 5.9), (5, 0.4, 11.6, 82.5)]

@@ -14,11 +14,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import lfstream
+from lfstream.codec.warp import warp_views
 from lfstream.errors import LFStreamError
 from lfstream.metrics import mpsnr, mssim, psnr, ssim
-from lfstream.refocus import focal_stack
-from lfstream.codec.warp import warp_views
 from lfstream.models.registry import load_model
+from lfstream.refocus import focal_stack
 
 FAST = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -128,8 +128,12 @@ def test_reduced_precision_inference_loses_at_most_0p1_db(dtype):
             low = net(x)[0].float().permute(0, 2, 3, 1).numpy()
     p32 = float(np.mean(psnr(ref.astype(np.float64) / 255, f32.astype(np.float64), data_range=1.0)))
     plow = float(np.mean(psnr(ref.astype(np.float64) / 255, low.astype(np.float64), data_range=1.0)))
-    # the rule: within 0.1 dB, or the stage stays float32 (bfloat16 measured 0.106 dB here)
+    # the rule: RefNet infers in a reduced precision only if it costs at most 0.1 dB; a larger
+    # loss keeps it float32 (bfloat16 measured 0.106 dB here). Both directions are checked.
     from lfstream.models.refnet import INFERENCE_DTYPE
 
-    assert abs(p32 - plow) <= 0.1 or INFERENCE_DTYPE == torch.float32, (p32, plow)
+    if INFERENCE_DTYPE == dtype:
+        assert abs(p32 - plow) <= 0.1, (p32, plow)
+    if abs(p32 - plow) > 0.1:
+        assert INFERENCE_DTYPE == torch.float32, (INFERENCE_DTYPE, p32, plow)
     assert abs(p32 - plow) < 0.5, (p32, plow)  # and never far off

@@ -51,7 +51,8 @@ def test_plane_warped_back_aligns(d):
     m = np.float32([[1, 0, d * 3], [0, 1, d * 3]])
     wrong = cv2.warpAffine(lf[6, 6], m, (128, 128), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP)
     assert np.abs(lf[3, 3][inner] - wrong[inner]).mean() > 3 * np.abs(lf[3, 3][inner] - cv2.warpAffine(
-        lf[6, 6], np.float32([[1, 0, -d * 3], [0, 1, -d * 3]]), (128, 128), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP)[inner]).mean()
+        lf[6, 6], np.float32([[1, 0, -d * 3], [0, 1, -d * 3]]), (128, 128),
+        flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP)[inner]).mean()
 
 
 def test_occlusion_ground_truth_is_front_most():

@@ -222,7 +222,9 @@ class Run:
         warm = max(1, recipe.steps // 20)
         # linear warm-up, then cosine decay to 2 % of the peak rate
         self.sched = torch.optim.lr_scheduler.LambdaLR(
-            self.opt, lambda k: min(1.0, (k + 1) / warm) * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(k, recipe.steps) / recipe.steps))))
+            self.opt,
+            lambda k: min(1.0, (k + 1) / warm)
+            * (0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(k, recipe.steps) / recipe.steps))))
         self.step = 0
         self.ckpt = out / f"{self.tag}.ckpt"
         self.log_path = out / f"{self.tag}.log.jsonl"

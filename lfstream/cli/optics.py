@@ -52,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
     n = array.cameras[0]
     lines = [
         f"plenoptic camera: F = {spc.focal_length_mm:g} mm, f/{spc.f_number:g} (aperture {spc.aperture_mm:g} mm), "
-        f"{spc.microlenses}x{spc.microlenses} microlenses of {spc.lens_pitch_mm:g} mm, {n}x{n} pixels of {spc.pitch_mm:g} mm each",
+        f"{spc.microlenses}x{spc.microlenses} microlenses of {spc.lens_pitch_mm:g} mm, "
+        f"{n}x{n} pixels of {spc.pitch_mm:g} mm each",
         f"equivalent camera array: {n}x{n} cameras, aperture {array.camera_aperture_mm:g} mm, "
         f"focal length {array.camera_focal_length_mm:g} mm, field of view {array.camera_fov_deg:.2f} deg, "
         f"{array.camera_resolution[0]}x{array.camera_resolution[1]} pixels, baseline {array.baseline_mm:g} mm, "

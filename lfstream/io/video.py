@@ -167,7 +167,7 @@ class VideoWriter:
             self._container = None
             self._tmp.unlink(missing_ok=True)
 
-    def __enter__(self) -> "VideoWriter":
+    def __enter__(self) -> VideoWriter:
         return self
 
     def abort(self) -> None:

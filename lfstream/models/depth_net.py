@@ -23,14 +23,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lfstream.models.layers import Bottleneck, count_params
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import to_network_input
+from lfstream.models.layers import Bottleneck, count_params
 
 
 @dataclass(frozen=True)
@@ -141,7 +140,7 @@ class DepthNet(nn.Module):
         return d.reshape(b, cfg.views[0], cfg.views[1], h, w)
 
 
-def grid_disparities(maps: torch.Tensor | "np.ndarray", views: tuple[int, int]):
+def grid_disparities(maps: torch.Tensor | np.ndarray, views: tuple[int, int]):
     """Maps a network's per-view disparities onto another view grid.
 
     Disparity is per view step, so the view at offset ``(du, dv)`` from the centre takes the
@@ -187,4 +186,5 @@ def build_depth_net(preset: str = "fast", views: tuple[int, int] = (7, 7), hint:
     return DepthNet(replace(cfg, views=tuple(views), hint=cfg.hint if hint is None else hint))
 
 
-__all__ = ["DepthNetConfig", "DEPTH_PRESETS", "DepthNet", "grid_disparities", "predict_view_disparities", "build_depth_net", "count_params"]
+__all__ = ["DepthNetConfig", "DEPTH_PRESETS", "DepthNet", "grid_disparities", "predict_view_disparities", "build_depth_net",
+           "count_params"]

@@ -16,13 +16,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 import torch
 from torch import nn
 
-from lfstream.models.layers import Bottleneck, count_params
 from lfstream.errors import LFShapeError
 from lfstream.lightfield import to_network_input
+from lfstream.models.layers import Bottleneck, count_params
 
 
 @dataclass(frozen=True)

@@ -22,10 +22,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lfstream.models.layers import Bottleneck, count_params
 from lfstream.errors import LFShapeError
+from lfstream.models.layers import Bottleneck, count_params
 from lfstream.optics import SEED_ALPHAS
-
 
 # RefNet runs in float32: bfloat16 autocast on CPU lost 0.106 dB PSNR against SaS on a
 # synthetic 7x7x48x64 LF (budget 0.1 dB; tests/test_stability.py).

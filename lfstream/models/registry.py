@@ -21,9 +21,9 @@ from typing import Any
 import torch
 from torch import nn
 
-from lfstream.models.layers import count_params
 from lfstream.errors import LFValueError, WeightsError
 from lfstream.io._fs import atomic_path, atomic_write_text
+from lfstream.models.layers import count_params
 
 WEIGHTS_DIR = Path(__file__).with_name("weights")
 MANIFEST = WEIGHTS_DIR / "manifest.json"

@@ -90,10 +90,13 @@ def refnet_stack(lf, slopes: np.ndarray, device: str | None = None, preset: str 
         raise LFValueError(f"method='refnet': the shipped RefNet takes {model.config.views[0]}x{model.config.views[1]} "
                            f"RGB views, got {tuple(lf.shape[-5:-3])} with {lf.shape[-1]} channels (train one with "
                            "tools/train.py, or use 'sas')")
+    from lfstream.models.refnet import INFERENCE_DTYPE
+
     x = to_network_input(lf, dev)
     video = x if x.ndim == 6 else x[None]
-    with torch.inference_mode():
-        out = model(video).permute(0, 1, 3, 4, 2)
+    reduced = INFERENCE_DTYPE != torch.float32
+    with torch.inference_mode(), torch.autocast(torch.device(dev).type, dtype=INFERENCE_DTYPE, enabled=reduced):
+        out = model(video).float().permute(0, 1, 3, 4, 2)
     out = out if x.ndim == 6 else out[0]
     return out if is_torch else out.cpu().numpy()
 

@@ -10,7 +10,8 @@ Skips (each switchable, each reported in the summary with what it saved and cost
   (a) ``skip_static``: a frame whose decoded centre view differs from the previous one by
       less than ``static_threshold`` (mean absolute 8-bit levels) reuses the previous
       frame's disparity (no hint decoding / Depth-Net);
-  (b) ``skip_planes`` (off by default, see :class:`StreamConfig`): focal planes whose slope lies outside the scene's disparity range
+  (b) ``skip_planes`` (off by default, see :class:`StreamConfig`): focal planes whose slope lies
+      outside the scene's disparity range
       (1st..99th percentile of the decoded disparity, widened by ``plane_margin``) are
       rendered by a cheap path (shift-and-sum at half resolution, upsampled) and flagged;
   (c) JPEG-Hance runs only at JPEG qualities where it was measured to help (the decoder's

@@ -20,9 +20,9 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Iterator
 from typing import Protocol
 
 from lfstream.codec.bitstream import (
@@ -356,7 +356,7 @@ class TcpReceiver:
                 conn, _ = self._server.accept()
                 conn.settimeout(self._timeout)
                 return conn
-            except socket.timeout:
+            except TimeoutError:
                 if (stop is not None and stop.is_set()) or time.monotonic() > deadline:
                     raise TransportError(f"no sender connected to {self.address[0]}:{self.address[1]} "
                                          f"within {self._timeout:.0f} s") from None
@@ -382,7 +382,7 @@ class TcpReceiver:
             if len(payload) < n:
                 return TAG_END, b""
             return tag, payload
-        except socket.timeout:
+        except TimeoutError:
             raise TransportError(f"no data for {self._timeout:.0f} s; the sender stalled") from None
         except OSError as exc:
             raise TransportError(f"receive failed ({exc.strerror or exc})") from exc
@@ -449,5 +449,6 @@ class LazyTcpSender:
             self._sender.close(stop)
 
 
-__all__ = ["Sender", "Receiver", "in_order", "LazyTcpSender", "InprocChannel", "FileChannel", "TcpSender", "TcpReceiver", "ReceiveStats", "SequenceFilter",
-           "TransportError", "parse_address", "put_until_stopped", "get_until_stopped", "TAG_HEADER", "TAG_PACKET", "TAG_END"]
+__all__ = ["Sender", "Receiver", "in_order", "LazyTcpSender", "InprocChannel", "FileChannel", "TcpSender", "TcpReceiver",
+           "ReceiveStats", "SequenceFilter", "TransportError", "parse_address", "put_until_stopped", "get_until_stopped",
+           "TAG_HEADER", "TAG_PACKET", "TAG_END"]

@@ -7,6 +7,7 @@ import zlib
 import numpy as np
 import pytest
 
+from lfstream.codec import decode, encode
 from lfstream.codec.bitstream import (
     Limits,
     Packet,
@@ -17,7 +18,6 @@ from lfstream.codec.bitstream import (
     read_header,
     split_stream,
 )
-from lfstream.codec import decode, encode
 from lfstream.errors import BitstreamError, LFStreamError
 from lfstream.synth import synth_clip
 
@@ -95,7 +95,7 @@ def test_bad_streams_name_the_problem(stream):
         "no frames": stream[: len(pack_header(split_stream(stream)[0]))],
         "not bytes": "a string",
     }
-    for what, data in cases.items():
+    for _what, data in cases.items():
         with pytest.raises(LFStreamError):
             decode(data)  # type: ignore[arg-type]
 

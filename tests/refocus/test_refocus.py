@@ -128,7 +128,7 @@ def test_hci_views_align_under_the_convention(scene):
         if abs(found["row"]) < 0.3:
             continue  # near the focal plane the sign cannot be told apart
         checked += 1
-        for name, s in found.items():
+        for _name, s in found.items():
             assert s == pytest.approx(found["row"], abs=0.2), (scene, y0, x0, found)
     assert checked >= 2, f"{scene}: too few patches away from the focal plane to check the sign"
 

@@ -9,11 +9,11 @@ import torch
 import lfstream
 from lfstream.cli import main
 from lfstream.codec.hint import decode_hint, disparity_errors, encode_hint, estimate_disparity
-from lfstream.errors import LFStreamError, LFValueError
-from lfstream.metrics import PSNR_CAP_DB, capped, mpsnr, mssim, psnr
-from lfstream.synth import fronto_parallel_plane, synth_clip
 from lfstream.codec.warp import warp_views
+from lfstream.errors import LFStreamError, LFValueError
+from lfstream.metrics import capped, mpsnr, mssim, psnr
 from lfstream.models.warp import warp_views_torch
+from lfstream.synth import fronto_parallel_plane, synth_clip
 
 
 def mean_psnr(ref, test):

@@ -11,19 +11,27 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import shared
 from lfstream.codec import jpeg_roundtrip
-from lfstream.models.depth_net import DepthNet, build_depth_net, grid_disparities, predict_view_disparities
-from lfstream.errors import LFShapeError, LFValueError, WeightsError
-from lfstream.models.losses import depth_net_loss, psi, refnet_loss, ssim_torch
-from lfstream.models.warp import warp_per_view
-from lfstream.metrics import mpsnr, psnr, ssim
-from lfstream.models.refnet import RefNet, build_refnet
-from lfstream.models.jpeg_hance import build_jpeg_hance, jpeg_hance, restore_images
-from lfstream.synth import fronto_parallel_plane, synth_clip
 from lfstream.codec.warp import warp_views, warp_views_per_view
-from lfstream.models.registry import (REGISTRY, ModelSpec, count_params, list_models, load_model, manifest_entry,
-                              register, spec)
+from lfstream.errors import LFShapeError, LFValueError, WeightsError
+from lfstream.metrics import mpsnr, psnr, ssim
+from lfstream.models.depth_net import build_depth_net, grid_disparities, predict_view_disparities
+from lfstream.models.jpeg_hance import build_jpeg_hance, jpeg_hance, restore_images
+from lfstream.models.losses import depth_net_loss, psi, refnet_loss, ssim_torch
+from lfstream.models.refnet import build_refnet
+from lfstream.models.registry import (
+    REGISTRY,
+    ModelSpec,
+    count_params,
+    list_models,
+    load_model,
+    manifest_entry,
+    register,
+    spec,
+)
+from lfstream.models.warp import warp_per_view
+from lfstream.synth import fronto_parallel_plane, synth_clip
+from tests.conftest import shared
 
 SEED_PARAMS = {"jpeg_hance": 202_435, "depth_net": 38_200_000, "refnet": 12_500_000}
 
@@ -174,7 +182,7 @@ def test_depth_loss_prefers_the_true_disparity():
 
 def test_shipped_depth_net_beats_flat_on_a_real_light_field():
     import lfstream
-    from lfstream.codec.hint import HintOptions, decode_hint, encode_hint, estimate_disparity
+    from lfstream.codec.hint import decode_hint, encode_hint, estimate_disparity
 
     lf = lfstream.read_lf(shared("seahorse5x5", "camImagesFlat"))[:, :, 150:278, 150:310]
     centre = jpeg_roundtrip(lf[2, 2], 50)

@@ -102,3 +102,27 @@ def test_demo_runs_and_never_overwrites(capsys, tmp_path):
     assert min(first["fourier_vs_sas_psnr_db"]) > 25
     code, out_text, _ = run(capsys, "demo", "-o", out, "--size", "48x64", "--json")
     assert json.loads(out_text)["output"] == str(tmp_path / "demo-2")
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["encode", "x.npy", "-o", "y.lfs", "--quality", "0"], "--quality"),
+    (["encode", "x.npy", "-o", "y.lfs", "--quality", "101"], "--quality"),
+    (["stream", "--quality", "200"], "--quality"),
+    (["stream", "--batch", "0"], "--batch"),
+    (["decode", "x.lfs", "-o", "y.npy", "--batch", "999"], "--batch"),
+    (["serve", "--port", "99999"], "--port"),
+    (["info", "x.npy", "--views", "0"], "--views"),
+])
+def test_numeric_options_are_range_checked_by_the_parser(capsys, argv, flag):
+    """Ranges come from the library's constants (QUALITY_RANGE, BATCH_RANGE, ...)."""
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert flag in err and "Traceback" not in err
+
+
+def test_baseline_qp_outside_the_codecs_range_is_one_line(capsys, tmp_path, rng):
+    np.save(tmp_path / "lf.npy", random_lf(rng, (3, 3, 16, 16, 3)))
+    code, out, err = run(capsys, "baseline", tmp_path / "lf.npy", "--codec", "hevc", "--qp", "99")
+    assert code == 2 and "--qp" in err and "0..51" in err and len(err.strip().splitlines()) == 1
