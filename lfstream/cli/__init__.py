@@ -12,6 +12,7 @@ import importlib
 import os
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from lfstream.errors import LFStreamError
 
@@ -33,16 +34,23 @@ COMMANDS = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line (the message and a pointer to ``--help``), exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from lfstream import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="lfstream",
         description="Light-field video: read, simulate, compress, reconstruct and refocus.",
     )
     parser.add_argument("--version", action="version", version=f"lfstream {__version__}")
     parser.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's choice)")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, module_name in COMMANDS.items():
         module = importlib.import_module(module_name)
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)

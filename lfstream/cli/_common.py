@@ -115,10 +115,32 @@ def _json_default(o: object):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+def strict_json(obj: object) -> object:
+    """``obj`` with every non-finite float replaced by ``None`` and the reason beside it in a
+    ``KEY_note`` entry (``+inf`` PSNR: identical images), so the output is RFC 8259 JSON."""
+    if isinstance(obj, dict):
+        out = {}
+        for k, v in obj.items():
+            out[k] = strict_json(v)
+            if isinstance(v, (float, np.floating)) and not math.isfinite(v):
+                out[f"{k}_note"] = "infinite (identical images)" if v > 0 else "not finite"
+            elif isinstance(v, (list, tuple, np.ndarray)) and any(
+                    isinstance(x, (float, np.floating)) and not math.isfinite(x) for x in np.ravel(np.asarray(v, object))):
+                out[f"{k}_note"] = "null entries are infinite (identical images) or not finite"
+        return out
+    if isinstance(obj, (list, tuple)):
+        return [strict_json(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return strict_json(obj.tolist())
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
 def emit(args: argparse.Namespace, result: dict, text: Callable[[dict], str] | str) -> None:
-    """Prints ``result`` as one JSON object under ``--json``, else the text ``text(result)``."""
+    """Prints ``result`` as one strict JSON object under ``--json``, else ``text(result)``."""
     if getattr(args, "json", False):
-        print(json.dumps(result, indent=2, default=_json_default))
+        print(json.dumps(strict_json(result), indent=2, default=_json_default, allow_nan=False))
     else:
         print(text(result) if callable(text) else text)
 

@@ -31,6 +31,16 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true")
 
 
+def check_output_folder(out: Path | None) -> None:
+    """``-o`` of ``stream``/``serve`` names a folder: a name with a file extension is almost
+    certainly a mistake (``-o out.mp4``), refused before anything is created."""
+    if out is not None and out.suffix and not out.is_dir():
+        from lfstream.errors import LFValueError
+
+        raise LFValueError(f"-o {out}: the output is a folder (it receives {', '.join(SAVE_KINDS)} outputs and "
+                           f"summary.json); give a name without the extension {out.suffix!r}")
+
+
 def pipeline_config(args: argparse.Namespace, **extra) -> StreamConfig:
     """The :class:`StreamConfig` the flags describe (``extra``: fields only ``stream`` sets)."""
     cfg = StreamConfig(refocus=args.refocus, device=args.device, batch=args.batch, depth=args.depth, hance=args.hance,
@@ -73,4 +83,4 @@ def report(args: argparse.Namespace, summary: dict, out: Path | None) -> None:
     emit(args, summary, lambda s: _text(s, out))
 
 
-__all__ = ["add_pipeline_options", "pipeline_config", "progress_callback", "report"]
+__all__ = ["add_pipeline_options", "check_output_folder", "pipeline_config", "progress_callback", "report"]

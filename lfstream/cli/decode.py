@@ -58,7 +58,9 @@ def run(args: argparse.Namespace) -> int:
         # a damaged stream still gives a valid output of every frame before the damage
         write_lf(args.output, np.stack(frames), overwrite=args.overwrite)
     if error is not None:
-        raise BitstreamError(f"{args.input}: {error} ({len(frames)} complete frame(s) before it written to {args.output})")
+        done = (f"{len(frames)} complete frame(s) before it written to {args.output}" if frames
+                else "no complete frame, nothing written")
+        raise BitstreamError(f"{args.input}: {error} ({done})")
     result = {"frames": len(frames), "decode_s": decode_s, "output": str(args.output)}
     emit(args, result, f"{len(frames)} frame(s) decoded in {decode_s:.3f} s -> {args.output}")
     return 0

@@ -10,11 +10,11 @@ from lfstream.cli._common import emit, parse_size
 from lfstream.io._fs import fresh_dir
 
 HELP = "the built-in demo: synthesise a light field, describe it, refocus it"
-DEFAULT_OUTPUT = Path("lfstream-out")
+DEFAULT_OUTPUT = Path("lfstream-demo")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("-o", "--output", type=Path, help=f"output folder (default {DEFAULT_OUTPUT}/demo, never overwritten)")
+    p.add_argument("-o", "--output", type=Path, help=f"output folder (default ./{DEFAULT_OUTPUT}[-N], never overwritten)")
     p.add_argument("--size", type=parse_size, default=(375, 540), help="view size HxW of the built-in light field")
     p.add_argument("--json", action="store_true")
 
@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.refocus import focal_stack
     from lfstream.synth import synth_clip
 
-    out = fresh_dir(args.output or DEFAULT_OUTPUT / "demo")
+    out = fresh_dir(args.output or DEFAULT_OUTPUT)
     h, w = args.size
     t0 = time.perf_counter()
     clip = synth_clip(frames=1, views=7, size=(h, w), seed=0, noise=2.0, vignetting=0.3)

@@ -6,7 +6,13 @@ import argparse
 import sys
 
 from lfstream.cli._common import float_in, int_in
-from lfstream.cli._pipeline import add_pipeline_options, pipeline_config, progress_callback, report
+from lfstream.cli._pipeline import (
+    add_pipeline_options,
+    check_output_folder,
+    pipeline_config,
+    progress_callback,
+    report,
+)
 
 HELP = "receive a stream over TCP, decode, refocus and write the outputs"
 
@@ -25,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.stream import Pipeline
     from lfstream.stream.transport import TcpReceiver
 
+    check_output_folder(args.output)
     cfg = pipeline_config(args)
     while True:
         # each sender's outputs in a folder of their own, never one that holds results

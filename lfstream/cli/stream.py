@@ -6,7 +6,13 @@ import argparse
 from pathlib import Path
 
 from lfstream.cli._common import add_read_options, int_in, read_options
-from lfstream.cli._pipeline import add_pipeline_options, pipeline_config, progress_callback, report
+from lfstream.cli._pipeline import (
+    add_pipeline_options,
+    check_output_folder,
+    pipeline_config,
+    progress_callback,
+    report,
+)
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.stream.config import TRANSPORTS
 
@@ -29,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.stream import Pipeline, file_source, synthetic_source
     from lfstream.stream.transport import TcpSender, parse_address
 
+    check_output_folder(args.output)
     fps = 30.0
     if args.input is None:
         source = synthetic_source(frames=args.frames)

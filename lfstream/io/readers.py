@@ -207,7 +207,18 @@ def _read_rgb_view(p: Path) -> np.ndarray:
     return img[:, :, :3]
 
 
+_ARRAY_MAGIC = {".npy": (b"\x93NUMPY", "a NumPy .npy file"), ".npz": (b"PK", "a NumPy .npz (zip) archive")}
+
+
 def _read_array_file(path: Path) -> LoadedLF:
+    magic, what = _ARRAY_MAGIC[path.suffix.lower()]
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(len(magic))
+    except OSError as exc:
+        raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    if head != magic:
+        raise LFFormatError(f"{path}: not {what} ({'empty file' if not head else 'its first bytes are ' + repr(head)})")
     try:
         if path.suffix.lower() == ".npy":
             lf = np.load(path, allow_pickle=False)

@@ -99,7 +99,7 @@ def test_demo_runs_and_never_overwrites(capsys, tmp_path):
     assert code == 0
     first = json.loads(out_text)
     assert first["lightfield"]["views"] == [7, 7] and (out / "focal_sweep.mp4").exists()
-    assert min(first["fourier_vs_sas_psnr_db"]) > 25
+    assert min(p for p in first["fourier_vs_sas_psnr_db"] if p is not None) > 25
     code, out_text, _ = run(capsys, "demo", "-o", out, "--size", "48x64", "--json")
     assert json.loads(out_text)["output"] == str(tmp_path / "demo-2")
 
@@ -126,3 +126,43 @@ def test_baseline_qp_outside_the_codecs_range_is_one_line(capsys, tmp_path, rng)
     np.save(tmp_path / "lf.npy", random_lf(rng, (3, 3, 16, 16, 3)))
     code, out, err = run(capsys, "baseline", tmp_path / "lf.npy", "--codec", "hevc", "--qp", "99")
     assert code == 2 and "--qp" in err and "0..51" in err and len(err.strip().splitlines()) == 1
+
+
+def test_usage_errors_are_one_line_without_the_usage_block(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["refocus", "x", "-o", "y", "--slopes", "-1,0,1"])  # argparse reads -1,0,1 as an option
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and len(err.strip().splitlines()) == 1
+    assert "usage:" not in err and "--help" in err
+
+
+def test_demo_json_is_strict_and_lands_in_its_own_folder(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, out, _ = run(capsys, "demo", "--size", "32x48", "--json")
+    assert code == 0
+    result = json.loads(out, parse_constant=lambda c: pytest.fail(f"non-standard JSON constant {c}"))
+    assert result["output"] == "lfstream-demo"  # its own default folder, not a stream's
+    assert (tmp_path / "lfstream-demo" / "focal_sweep.mp4").exists()
+    # the planes that equal the input exactly have infinite PSNR: null, with the reason beside it
+    psnrs = result["fourier_vs_sas_psnr_db"]
+    assert all(p is None or np.isfinite(p) for p in psnrs)
+    if None in psnrs:
+        assert "infinite" in result["fourier_vs_sas_psnr_db_note"]
+    code, out, _ = run(capsys, "demo", "--size", "32x48", "--json")
+    assert json.loads(out)["output"] == "lfstream-demo-2"  # never overwritten
+
+
+def test_bad_files_say_what_is_wrong(capsys, tmp_path):
+    (tmp_path / "text.npy").write_text("hello")
+    code, _, err = run(capsys, "info", tmp_path / "text.npy")
+    assert code == 2 and "not a NumPy .npy file" in err and "pickle" not in err
+    (tmp_path / "empty.lfs").write_bytes(b"")
+    code, _, err = run(capsys, "decode", tmp_path / "empty.lfs", "-o", tmp_path / "out.npy")
+    assert code == 2 and "truncated" in err and "nothing written" in err
+    assert not (tmp_path / "out.npy").exists()
+
+
+def test_stream_output_with_an_extension_is_refused(capsys, tmp_path):
+    code, _, err = run(capsys, "stream", "-o", tmp_path / "out.xyz")
+    assert code == 2 and "-o" in err and ".xyz" in err
+    assert not (tmp_path / "out.xyz").exists()

@@ -166,3 +166,45 @@ def test_serve_and_stream_cli_over_tcp(tmp_path, capsys):
     summary = json.loads((tmp_path / "srv2" / "summary.json").read_text())
     assert summary["frames"] == 3 and summary["lost"] == 0
     assert len(list(iter_video_frames(tmp_path / "srv2" / "plane_00.mp4"))) == 3
+
+
+@pytest.mark.parametrize("stage", ["producer", "encoder", "decoder", "refocus", "sink", "metrics"])
+def test_a_failure_in_any_stage_ends_the_run_promptly_with_its_error(tmp_path, monkeypatch, stage):
+    """Any stage's exception stops every stage: the run raises PipelineError naming the
+    stage within seconds instead of hanging on a queue."""
+    from lfstream.codec.decoder import Decoder
+    from lfstream.stream import stages
+
+    def boom(*args, **kwargs):
+        raise RuntimeError(f"injected failure in {stage}")
+
+    frames = small_source(frames=6)
+    source = frames
+    if stage == "producer":
+        def failing():
+            yield next(frames)
+            boom()
+        source = failing()
+    else:
+        target = {"encoder": (stages.EncoderStage, "work"), "decoder": (Decoder, "decode_batch"),
+                  "refocus": (stages.RefocusStage, "work"), "sink": (stages.SinkStage, "work"),
+                  "metrics": (stages.MetricsStage, "work")}[stage]
+        monkeypatch.setattr(*target, boom)
+    out = prepare_output_dir(tmp_path / "out")
+    result: dict = {}
+
+    def run_it():
+        try:
+            Pipeline(source, StreamConfig(refocus="sas", mssim_every=0), out).run()
+        except Exception as exc:  # noqa: BLE001 - recorded for the assertions below
+            result["error"] = exc
+
+    t = threading.Thread(target=run_it, daemon=True)
+    t0 = time.perf_counter()
+    t.start()
+    t.join(timeout=30)
+    assert not t.is_alive(), f"the pipeline hung after a failure in {stage}"
+    assert time.perf_counter() - t0 < 30
+    err = result.get("error")
+    assert isinstance(err, PipelineError) and err.stage == stage, err
+    assert f"injected failure in {stage}" in str(err)
