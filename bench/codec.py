@@ -1,12 +1,13 @@
 """lfstream's codec against HEVC and AV1 pseudo-sequences at matched rate.
 
-For each light field: lfstream at JPEG quality 50 (flat disparity, and with the depth hint),
-then HEVC and AV1 searched to the same bits per pixel; for all: bpp, MPSNR, MSSIM, the
+For each light field: lfstream at JPEG quality 50 (the default, with the depth hint; and flat),
+then x265 medium, x265 ultrafast and SVT-AV1 searched to the default's bits per pixel, with
+the speed ratios against x265 and HEVC decode; for all: bpp, MPSNR, MSSIM, the
 depth-of-field image's PSNR/SSIM, near/far refocused images' PSNR/SSIM (seed: alpha = 0.15
 and 1.5), and encode/decode times measured here by the harness (median of --runs). All
 metrics on the 8-bit reconstructions.
 
-    python bench/codec.py [--json [FILE]] [--runs N] [--quick]
+    python bench/codec.py [--json [FILE]] [--runs N] [--quick] [--no-rd]
 """
 
 from __future__ import annotations
@@ -40,27 +41,36 @@ def quality(ref: np.ndarray, rec: np.ndarray) -> dict:
     }
 
 
-def evaluate(name: str, lf: np.ndarray, runs: int) -> list[dict]:
+def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = None) -> list[dict]:
+    """The default (hint) and flat lfstream at q50, then x265 medium and ultrafast and SVT-AV1
+    searched to the default's bpp; each timed here; speed ratios against x265 / HEVC."""
     rows = []
-    for label, hint in (("lfstream q50 flat", False), ("lfstream q50 hint", True)):
-        data = lfstream.encode(lf, quality=50, depth_hint=hint)
+    for label, hint in (("lfstream q50 (default: hint)", True), ("lfstream q50 flat", False)):
+        data = lfstream.encode(lf, quality=50, depth_hint=hint, present=present)
         rec = lfstream.decode(data)[0]
-        t_enc = timeit(lambda: lfstream.encode(lf, quality=50, depth_hint=hint), runs=runs)
+        t_enc = timeit(lambda: lfstream.encode(lf, quality=50, depth_hint=hint, present=present), runs=runs)
         t_dec = timeit(lambda: lfstream.decode(data), runs=runs)
         rows.append({"lf": name, "method": label, "bytes": len(data), "bpp": bpp(len(data), lf.shape),
                      "encode_s": t_enc["median_s"], "decode_s": t_dec["median_s"], **quality(lf, rec)})
     target = rows[0]["bpp"]
-    for codec in ("hevc", "av1"):
-        res = encode_at_bpp(lf, codec, target)
+    for codec, preset in (("hevc", "medium"), ("hevc", "ultrafast"), ("av1", None)):
+        res = encode_at_bpp(lf, codec, target, preset=preset)
         rec = decode_views(res.data, codec, lf.shape[:2], lf.shape[2:4])
-        t_enc = timeit(lambda: encode_views(lf, codec, res.quality, constant_qp=res.constant_qp), runs=max(1, runs // 2))
+        t_enc = timeit(lambda: encode_views(lf, codec, res.quality, constant_qp=res.constant_qp, preset=preset),
+                       runs=max(1, runs // 2))
         t_dec = timeit(lambda: decode_views(res.data, codec, lf.shape[:2], lf.shape[2:4]), runs=runs)
-        rows.append({"lf": name, "method": f"{codec} @ lfstream-flat bpp", "quality_param": res.quality,
+        label = {"medium": "x265 medium", "ultrafast": "x265 ultrafast"}.get(preset, "SVT-AV1")
+        rows.append({"lf": name, "method": f"{label} @ default bpp", "quality_param": res.quality,
                      "bytes": res.bytes, "bpp": res.bpp, "encode_s": t_enc["median_s"], "decode_s": t_dec["median_s"],
                      **quality(lf, rec)})
+    ours, x265, fast = rows[0], rows[2], rows[3]
+    ours["speed"] = {"encode_vs_x265_medium": x265["encode_s"] / ours["encode_s"],
+                     "encode_vs_x265_ultrafast": fast["encode_s"] / ours["encode_s"],
+                     "decode_vs_hevc": x265["decode_s"] / ours["decode_s"]}
     for r in rows:
-        print(f"{name:22s} {r['method']:24s} {r['bpp']:.4f} bpp  MPSNR {r['mpsnr']:6.2f}  MSSIM {r['mssim']:.4f}  "
+        print(f"{name:22s} {r['method']:30s} {r['bpp']:.4f} bpp  MPSNR {r['mpsnr']:6.2f}  MSSIM {r['mssim']:.4f}  "
               f"DoF {r['dof_psnr']:6.2f}  enc {r['encode_s'] * 1e3:8.1f} ms  dec {r['decode_s'] * 1e3:7.1f} ms")
+    print("  speed: " + ", ".join(f"{k} {v:.1f}x" for k, v in rows[0]["speed"].items()))
     return rows
 
 
@@ -138,17 +148,23 @@ def plot_rd(rd: dict, path: Path) -> None:
 
 
 def main(argv=None) -> dict:
-    args = parser(__doc__).parse_args(argv)
+    p = parser(__doc__)
+    p.add_argument("--no-rd", action="store_true", help="skip the rate-distortion curves (slow)")
+    args = p.parse_args(argv)
     runs = 1 if args.quick else args.runs
     size = (128, 160) if args.quick else (375, 540)
     cases = [("synthetic noisy", synth_clip(1, 7, size, seed=21, noise=2.0, vignetting=0.3, motion=0, camera_pan=0).lf[0])]
-    sea = ROOT.parent / "shared" / "data" / "seahorse5x5" / "camImagesFlat"
-    if sea.exists():
-        lf = lfstream.read_lf(sea)
-        cases.append(("seahorse5x5", lf[:, :, :256, 128:384] if args.quick else lf))
+    data = ROOT.parent / "shared" / "data"
+    for name, folder in (("seahorse5x5", "seahorse5x5/camImagesFlat"), ("lytro_bikes", "lytro_bikes"),
+                         ("lytro_translucent", "lytro_translucent")):
+        if (data / folder).exists() and not (args.quick and name != "seahorse5x5"):
+            lf = lfstream.read_lf(data / folder)
+            cases.append((name, lf[:, :, :256, 128:384] if args.quick else lf))
     results, rd = [], []
     for name, lf in cases:
         results += evaluate(name, lf, runs)
+        if args.no_rd:
+            continue
         curves = rd_curves(name, lf)
         rd.append(curves)
         plot_rd(curves, ROOT / "bench" / "results" / f"codec_rd_{name.split()[0]}.png")

@@ -16,7 +16,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path)
     p.add_argument("-o", "--output", type=Path, required=True, help="the .lfs file (never overwritten without --overwrite)")
     p.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="JPEG quality of the centre view (default 50)")
-    p.add_argument("--depth-hint", action="store_true", help="also send the encoder's disparity estimate")
+    hint = p.add_mutually_exclusive_group()
+    hint.add_argument("--depth-hint", dest="depth_hint", action="store_true", default=True,
+                      help="send the encoder's disparity estimate (the default)")
+    hint.add_argument("--no-depth-hint", dest="depth_hint", action="store_false",
+                      help="send only the JPEG centre view (fewest bits, flat reconstruction)")
     p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate to record (default: the input's, else 30)")
     p.add_argument("--overwrite", action="store_true")
     add_read_options(p)

@@ -74,12 +74,12 @@ class PseudoSequenceCodec:
     quality_range: tuple[float, float]  # bigger value = fewer bits
     fractional: bool
 
-    def options(self, quality: float, gop: int, constant_qp: bool) -> dict[str, str]:
+    def options(self, quality: float, gop: int, constant_qp: bool, preset: str | None = None) -> dict[str, str]:
         if self.name == "hevc":
             rc = f"qp={int(round(quality))}" if constant_qp else f"crf={quality:.3f}"
-            return {"preset": "medium",
+            return {"preset": preset or "medium",
                     "x265-params": f"{rc}:keyint={gop}:min-keyint={gop}:scenecut=0:log-level=error:frame-threads=1"}
-        return {"preset": "8", "crf": str(int(round(quality))), "g": str(gop)}
+        return {"preset": preset or "8", "crf": str(int(round(quality))), "g": str(gop)}
 
 
 CODECS = {
@@ -95,8 +95,9 @@ def _codec(name: str) -> PseudoSequenceCodec:
 
 
 def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order: str = "raster",
-                 constant_qp: bool = True) -> bytes:
-    """Codes one LF frame ``(U, V, H, W, 3)`` as a pseudo-sequence; returns the bitstream."""
+                 constant_qp: bool = True, preset: str | None = None) -> bytes:
+    """Codes one LF frame ``(U, V, H, W, 3)`` as a pseudo-sequence; returns the bitstream.
+    ``preset``: the encoder's speed preset (x265 ``medium`` and SVT-AV1 ``8`` by default)."""
     import av
 
     spec = _codec(codec)
@@ -110,7 +111,7 @@ def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order
     buf = io.BytesIO()
     with av.open(buf, mode="w", format=spec.container) as container:
         stream = container.add_stream(spec.encoder, rate=Fraction(25, 1),
-                                      options=spec.options(quality, u * v, constant_qp))
+                                      options=spec.options(quality, u * v, constant_qp, preset))
         stream.width, stream.height, stream.pix_fmt = pw, ph, "yuv420p"
         for a, b in view_order(u, v, order):
             img = frame_lf[a, b]
@@ -158,7 +159,7 @@ class BaselineResult:
 
 
 def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "raster", tolerance: float = 0.02,
-                  max_steps: int = 14) -> BaselineResult:
+                  max_steps: int = 14, preset: str | None = None) -> BaselineResult:
     """Searches the codec's quality parameter for the rate closest to ``target_bpp``.
 
     HEVC bisects x265's fractional CRF until within ``tolerance`` (relative); AV1 bisects
@@ -177,7 +178,7 @@ def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "r
     best: BaselineResult | None = None
     for _ in range(max_steps):
         q = 0.5 * (lo + hi) if fractional else float(int(round(0.5 * (lo + hi))))
-        data = encode_views(lf, codec, q, order, constant_qp=constant_qp)
+        data = encode_views(lf, codec, q, order, constant_qp=constant_qp, preset=preset)
         rate = bits_per_pixel(len(data), shape)
         res = BaselineResult(codec, order, q, len(data), rate, data, constant_qp)
         if best is None or abs(rate - target_bpp) < abs(best.bpp - target_bpp):
@@ -190,7 +191,7 @@ def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "r
             hi = q
         if not fractional and hi - lo <= 1:
             for q2 in (lo, hi):
-                data = encode_views(lf, codec, q2, order, constant_qp=constant_qp)
+                data = encode_views(lf, codec, q2, order, constant_qp=constant_qp, preset=preset)
                 rate = bits_per_pixel(len(data), shape)
                 if abs(rate - target_bpp) < abs(best.bpp - target_bpp):
                     best = BaselineResult(codec, order, q2, len(data), rate, data, constant_qp)

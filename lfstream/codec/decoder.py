@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from lfstream.codec.bitstream import Limits, Packet, StreamHeader, iter_packets, read_header
-from lfstream.codec.hint import decode_hint
+from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.jpeg import decode_jpeg
 from lfstream.codec.shading import apply_gains, decode_gains
 from lfstream.codec.warp import warp_views, warp_views_per_view
@@ -82,6 +82,9 @@ class Decoder:
         use_hance = self.hance == "on" or (self.hance == "auto"
                                            and self.header.quality <= HANCE_MAX_QUALITY.get(self.preset, 0))
         self._hance = load_model("jpeg_hance", self.preset, self.device) if use_hance else None
+        self._hints = HintDecoder()
+        self._last_disparity: np.ndarray | None = None
+        self.hint_fallbacks = 0  # delta hints whose reference frame never arrived
         self._depth_net = None
         if self.depth == "net":
             self._depth_net = load_model("depth_net", self.preset, self.device)
@@ -116,7 +119,29 @@ class Decoder:
 
     def reconstruct(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray) -> DecodedFrame:
         """Warps a decoded centre view by a given centre-view disparity (occlusion-aware) and
-        applies the packet's shading gains; also serves callers that reuse a disparity."""
+        applies the packet's shading gains; also serves callers that reuse a disparity (the
+        packet's hint is still read, so later delta hints can refer to it)."""
+        if packet.hint and self.estimates_depth:
+            try:
+                self._hints.parse(packet.hint, self.header.size, packet.seq)
+            except HintReferenceError:
+                self.hint_fallbacks += 1
+        return self._warp(packet, centre, disparity)
+
+    def _hint_disparity(self, packet: Packet, centre: np.ndarray) -> np.ndarray:
+        """The packet's hint, decoded; where it is a delta to a frame that never arrived (a
+        lossy transport), the last disparity this decoder produced stands in until the
+        next key hint (counted in :attr:`hint_fallbacks`)."""
+        h, w = self.header.size
+        try:
+            d = self._hints.decode(packet.hint, (h, w), guide=centre, frame=packet.seq)
+        except HintReferenceError:
+            self.hint_fallbacks += 1
+            d = self._last_disparity if self._last_disparity is not None else np.zeros((h, w), np.float32)
+        self._last_disparity = d
+        return d
+
+    def _warp(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray) -> DecodedFrame:
         lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion)
         return self._finish(packet, centre, disparity, lf)
 
@@ -138,9 +163,9 @@ class Decoder:
             use_hint = self.depth in ("hint", "net") or (self.depth == "auto" and p.hint)
             if use_hint and not p.hint:
                 raise BitstreamError("packet has no depth hint", p.seq)
-            hints.append(decode_hint(p.hint, (h, w), guide=centre, frame=p.seq) if use_hint else None)
+            hints.append(self._hint_disparity(p, centre) if use_hint else None)
         if self._depth_net is None:
-            return [self.reconstruct(p, centre, hint if hint is not None else np.zeros((h, w), np.float32))
+            return [self._warp(p, centre, hint if hint is not None else np.zeros((h, w), np.float32))
                     for p, centre, hint in zip(packets, centres, hints)]
         from lfstream.models.depth_net import predict_view_disparities
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter
-from lfstream.codec.hint import HintOptions, encode_hint, estimate_disparity
+from lfstream.codec.hint import HintOptions, HintTracker
 from lfstream.codec.jpeg import QUALITY_RANGE, encode_jpeg
 from lfstream.codec.shading import encode_gains, measure_gains, shading_present
 from lfstream.errors import LFStreamError, LFValueError
@@ -39,7 +39,7 @@ class Encoder:
     """
 
     quality: int = 50
-    depth_hint: bool = False
+    depth_hint: bool = True
     hint_options: HintOptions = field(default_factory=HintOptions)
     gain_grid: int = 4  # per-view brightness gains on a grid x grid mesh; 0 sends none
 
@@ -50,14 +50,14 @@ class Encoder:
         if not isinstance(self.gain_grid, (int, np.integer)) or not 0 <= self.gain_grid <= 64:
             raise LFValueError(f"gain_grid: an integer in 0..64, got {self.gain_grid!r}")
         self.hint_options.validate()
+        self._hints = HintTracker(self.hint_options)
 
     def header(self, views: tuple[int, int], size: tuple[int, int], fps: float) -> StreamHeader:
         from lfstream import __version__
 
         meta = {"encoder": ENCODER_NAME, "version": __version__, "quality": int(self.quality), "gain_grid": self.gain_grid}
         if self.depth_hint:
-            meta["hint"] = {"max_disparity": self.hint_options.max_disparity, "steps": self.hint_options.steps,
-                            "hint_scale": self.hint_options.hint_scale}
+            meta["hint"] = self.hint_options.as_meta()
         return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint, meta=meta)
 
     def encode_frame(self, lf: np.ndarray, seq: int, timestamp_us: int, present: np.ndarray | None = None) -> Packet:
@@ -80,7 +80,7 @@ class Encoder:
         image = encode_jpeg(centre_view(frame), self.quality)
         hint = b""
         if self.depth_hint:
-            hint = encode_hint(estimate_disparity(frame, self.hint_options, present), self.hint_options)
+            hint = self._hints.encode(frame, seq, present)
         gain = b""
         if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1:
             gains = measure_gains(frame, self.gain_grid, present=present)
@@ -114,7 +114,7 @@ def frames_of(lf: np.ndarray) -> np.ndarray:
 def encode(
     lf: np.ndarray,
     quality: int = 50,
-    depth_hint: bool = False,
+    depth_hint: bool = True,
     fps: float = 30.0,
     hint_options: HintOptions | None = None,
     gain_grid: int = 4,

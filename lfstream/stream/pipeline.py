@@ -163,6 +163,9 @@ class Pipeline:
             raise ctl.error
         refocuser = refocus.refocuser if refocus is not None else None
         receive = recv_channel.stats.as_dict() if recv_channel is not None else None
+        if receive is not None and decoder is not None and decoder.decoder is not None:
+            # delta hints whose reference frame was lost: the previous disparity stood in
+            receive["hint_fallbacks"] = decoder.decoder.hint_fallbacks
         return build_summary(
             wall_s=wall,
             frames=self.stats["sink"].frames if self.sender is None else self.stats["encoder"].frames,

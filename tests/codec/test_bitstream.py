@@ -45,8 +45,11 @@ def test_encode_is_deterministic_and_decodes(clip, stream):
     assert encode(clip, quality=60) == stream
     out = decode(stream)
     assert out.shape == clip.shape and out.dtype == np.uint8
-    # flat disparity: every view is the decoded centre view
-    assert (out[:, 0, 0] == out[:, 2, 2]).all()
+    # the hint is on by default: the corner views differ from the centre view ...
+    assert not (out[:, 0, 0] == out[:, 2, 2]).all()
+    # ... and with flat disparity every view is the decoded centre view
+    flat = decode(stream, depth="flat")
+    assert (flat[:, 0, 0] == flat[:, 2, 2]).all() and (flat[:, 2, 2] == out[:, 2, 2]).all()
     # the centre view is exactly the JPEG (q60) of the input's centre view
     from lfstream.codec import decode_jpeg, encode_jpeg
 

@@ -91,7 +91,7 @@ def test_api_errors():
     bad[0, 0, 0, 0, 0] = np.inf
     with pytest.raises(LFValueError, match="NaN or Inf"):
         lfstream.encode(bad)
-    data = lfstream.encode(lf)
+    data = lfstream.encode(lf, depth_hint=False)
     with pytest.raises(LFValueError, match="hint"):
         lfstream.decode(data, depth="hint")
     with pytest.raises(LFValueError, match="Depth-Net"):
@@ -182,8 +182,8 @@ def test_encode_star_light_field_with_missing_views():
 
     lf, present = lfstream.read_lf(shared("hci_star", "cotton"), return_mask=True)
     lf, present = lf[:, :, 128:320, 128:384], present
-    flat = lfstream.decode(lfstream.encode(lf, present=present))[0]
-    hint = lfstream.decode(lfstream.encode(lf, present=present, depth_hint=True))[0]
+    flat = lfstream.decode(lfstream.encode(lf, present=present, depth_hint=False))[0]
+    hint = lfstream.decode(lfstream.encode(lf, present=present))[0]  # the hint is the default
     assert hint.shape == (9, 9, 192, 256, 3)
     idx = [(u, v) for u, v in zip(*np.nonzero(present)) if (u, v) != (4, 4)]
     p_flat = np.mean([psnr(lf[u, v], flat[u, v]) for u, v in idx])
@@ -209,7 +209,7 @@ def test_decode_with_networks_and_switches(tmp_path):
             pytest.raises(LFValueError, match="'cpu' or 'cuda'"):
         lfstream.decode(data, device="cuda" if not torch.cuda.is_available() else "tpu")
     with pytest.raises(LFValueError, match="depth hint"):
-        lfstream.decode(lfstream.encode(clip.lf), depth="net")
+        lfstream.decode(lfstream.encode(clip.lf, depth_hint=False), depth="net")
     src = tmp_path / "c.lfs"
     src.write_bytes(data)
     out = tmp_path / "out.npy"
