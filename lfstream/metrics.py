@@ -77,6 +77,32 @@ def _out(t: torch.Tensor, is_torch: bool):
     return float(arr) if arr.ndim == 0 else arr
 
 
+def _psnr_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
+    """PSNR of numpy images through OpenCV's SIMD norm (squared errors summed in float64,
+    ~20x faster than a float64 torch pass over a 7x7x375x540 light field)."""
+    import cv2
+
+    if x.shape != y.shape:
+        raise LFShapeError(f"metrics: shapes differ: {x.shape} vs {y.shape}")
+    if x.ndim < 3:
+        raise LFShapeError(f"metrics: expected (..., H, W, C), got shape {x.shape}")
+    for a in (x, y):
+        if not (a.dtype == np.uint8 or np.issubdtype(a.dtype, np.floating)):
+            raise LFValueError(f"metrics: expected uint8 or float data, got {a.dtype}")
+    rng = float(data_range) if data_range is not None else (255.0 if x.dtype == np.uint8 else 1.0)
+    if not math.isfinite(rng) or rng <= 0:
+        raise LFValueError(f"data_range: must be positive and finite, got {data_range!r}")
+    h, w, c = x.shape[-3:]
+    if x.dtype != y.dtype or x.dtype not in (np.uint8, np.float32, np.float64):
+        x, y = x.astype(np.float64), y.astype(np.float64)
+    xs = np.ascontiguousarray(x).reshape(-1, h, w * c)
+    ys = np.ascontiguousarray(y).reshape(-1, h, w * c)
+    sse = np.array([cv2.norm(a, b, cv2.NORM_L2SQR) for a, b in zip(xs, ys)], np.float64)
+    with np.errstate(divide="ignore"):
+        out = (10.0 * np.log10(rng**2 / (sse / (h * w * c)))).reshape(x.shape[:-3])
+    return float(out) if out.ndim == 0 else out
+
+
 def psnr(x, y, data_range: float | None = None):
     """Peak signal-to-noise ratio in dB per image.
 
@@ -84,6 +110,8 @@ def psnr(x, y, data_range: float | None = None):
         - x, y: ``(..., H, W, C)``
         - output: ``(...)``
     """
+    if not isinstance(x, torch.Tensor) and not isinstance(y, torch.Tensor):
+        return _psnr_numpy(np.asarray(x), np.asarray(y), data_range)
     tx, ty, rng, is_torch = _pair(x, y, data_range, torch.float64)
     mse = (tx - ty).pow(2).mean(dim=(-3, -2, -1))
     out = 10.0 * torch.log10(rng**2 / mse)  # mse == 0 -> +inf by IEEE division

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +12,10 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"
+
+# the built-in clip's cache (lfstream.stream.sources.cache_dir) goes to a temporary folder,
+# never into the user's ~/.cache, and starts empty for every test session
+os.environ["LFSTREAM_CACHE"] = tempfile.mkdtemp(prefix="lfstream-test-cache-")
 
 #: Absolute tolerance per floating dtype for values in [0, 1].
 TOLERANCE = {torch.float64: 1e-9, torch.float32: 1e-5, torch.float16: 2e-3, torch.bfloat16: 1e-2}

@@ -97,3 +97,14 @@ def test_bjontegaard_deltas():
     assert bd_rate(rates, psnrs, rates, psnrs) == pytest.approx(0.0, abs=1e-9)
     with pytest.raises(LFValueError):
         bd_rate(rates[:3], psnrs[:3], rates, psnrs)
+
+
+def test_numpy_and_torch_psnr_paths_agree(rng):
+    a = rng.integers(0, 256, (2, 3, 20, 24, 3), dtype=np.uint8)
+    b = np.clip(a.astype(int) + rng.integers(-9, 10, a.shape), 0, 255).astype(np.uint8)
+    fast = psnr(a, b)
+    ref = psnr(torch.from_numpy(a), torch.from_numpy(b)).numpy()
+    assert fast.shape == (2, 3) and np.allclose(fast, ref, atol=1e-9)
+    fa, fb = a.astype(np.float32) / 255, b.astype(np.float32) / 255
+    assert np.allclose(psnr(fa, fb), ref, atol=1e-4)
+    assert psnr(a[0, 0], a[0, 0]) == np.inf

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import time
 
 import cv2
 import numpy as np
 
 from lfstream.codec.decoder import DecodedFrame
-from lfstream.errors import LFValueError
+from lfstream.errors import LFStreamError, LFValueError
 from lfstream.optics import SEED_ALPHAS, slopes_from_alphas
 from lfstream.stream.config import StreamConfig
 from lfstream.stream.report import PlaneSkipStats
@@ -34,7 +35,9 @@ class Refocuser:
 
     def choose(self, lf: np.ndarray) -> None:
         """``auto``: RefNet when it is applicable, faster than SaS on this device and within
-        30 dB PSNR of SaS on this frame; otherwise SaS (measured on the first frame)."""
+        30 dB PSNR of SaS on this frame; otherwise SaS. Measured on the first frame (after a
+        warm-up) and remembered in the cache folder, so every later run on this machine
+        makes the same choice without measuring again."""
         from lfstream.metrics import psnr
         from lfstream.refocus import focal_stack
 
@@ -45,6 +48,13 @@ class Refocuser:
         if not self._refnet_applicable():
             self.method, self.reason = "sas", "RefNet not applicable (grid or alphas differ from its training)"
             return
+        key = self._choice_key(lf)
+        cached = _read_choices().get(key)
+        if cached is not None:
+            self.method = cached["method"]
+            self.reason = f"{cached['reason']} (measured on an earlier run on this machine, cached)"
+            return
+        focal_stack(lf, self.config.alphas)  # warm-up: the kernels load before anything is timed
         t0 = time.perf_counter()
         ref = focal_stack(lf, self.config.alphas)
         t_sas = time.perf_counter() - t0
@@ -59,6 +69,18 @@ class Refocuser:
             self.method = "sas"
         self.reason = (f"measured on frame 0 ({self.config.device}): SaS {t_sas * 1e3:.0f} ms, RefNet {t_net * 1e3:.0f} ms "
                        f"at {err:.1f} dB vs SaS")
+        _write_choice(key, {"method": self.method, "reason": self.reason})
+
+    def _choice_key(self, lf: np.ndarray) -> str:
+        """What the measured choice depends on: device, light-field shape, planes, versions."""
+        import torch
+
+        from lfstream import __version__
+        from lfstream.models.registry import manifest_entry
+
+        entry = manifest_entry("refnet", "fast") or {}
+        return "|".join(str(x) for x in (self.config.device, lf.shape, np.round(self.slopes, 6).tolist(), __version__,
+                                         torch.__version__, torch.get_num_threads(), entry.get("sha256")))
 
     def render(self, f: DecodedFrame) -> tuple[np.ndarray | None, list[int]]:
         """The focal stack ``(K, H, W, 3)`` uint8 of a decoded frame and the planes rendered cheaply."""
@@ -100,6 +122,35 @@ class Refocuser:
             sk.planes += len(cheap)
             sk.saved_s += (sk.saved_per_plane_s or 0.0) * len(cheap)
         return out, cheap
+
+
+_CHOICES = "refocus-choices.json"
+
+
+def _read_choices() -> dict:
+    from lfstream.stream.sources import cache_dir
+
+    folder = cache_dir()
+    try:
+        return json.loads((folder / _CHOICES).read_text()) if folder is not None else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _write_choice(key: str, choice: dict) -> None:
+    """Remembers a measured choice so that later runs make the same one without measuring."""
+    from lfstream.io._fs import atomic_write_text
+    from lfstream.stream.sources import cache_dir
+
+    folder = cache_dir()
+    if folder is None:
+        return
+    choices = _read_choices()
+    choices[key] = choice
+    try:
+        atomic_write_text(folder / _CHOICES, json.dumps(choices, indent=1, sort_keys=True))
+    except LFStreamError:
+        pass  # a cache that cannot be written only costs the next run a measurement
 
 
 __all__ = ["Refocuser"]

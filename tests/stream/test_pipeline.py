@@ -208,3 +208,19 @@ def test_a_failure_in_any_stage_ends_the_run_promptly_with_its_error(tmp_path, m
     err = result.get("error")
     assert isinstance(err, PipelineError) and err.stage == stage, err
     assert f"injected failure in {stage}" in str(err)
+
+
+def test_builtin_clip_is_cached_and_identical_to_a_fresh_render(tmp_path, monkeypatch):
+    monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path / "cache"))
+    fresh = list(synthetic_source(frames=3, views=5, size=(32, 48), seed=9, cache=False))
+    first = list(synthetic_source(frames=3, views=5, size=(32, 48), seed=9))  # renders and stores
+    stored = list((tmp_path / "cache").glob("builtin-*.npy"))
+    assert len(stored) == 1 and not list((tmp_path / "cache").glob(".*"))  # no temporary left
+    second = list(synthetic_source(frames=3, views=5, size=(32, 48), seed=9))  # reads the cache
+    for a, b, c in zip(fresh, first, second):
+        assert np.array_equal(a, b) and np.array_equal(a, c)
+    # a stream stopped early leaves no (partial) cache behind
+    gen = synthetic_source(frames=3, views=5, size=(32, 48), seed=10)
+    next(gen)
+    gen.close()
+    assert len(list((tmp_path / "cache").glob("*seed10*"))) == 0
