@@ -227,31 +227,42 @@ def _check_lf_pair(ref, test) -> None:
         raise LFShapeError(f"light-field metrics: expected (U, V, H, W, C) or (T, U, V, H, W, C), got {tuple(ref.shape)}")
 
 
-def mpsnr(ref, test, data_range: float | None = None):
+def mpsnr(ref, test, data_range: float | None = None, present=None):
     """Mean PSNR over the views of a light field (seed Eq. 3.10).
 
-    Infinite if any view is identical (see :data:`PSNR_CAP_DB` for tables).
+    Infinite if any view is identical (see :data:`PSNR_CAP_DB` for tables). ``present``: a
+    ``(U, V)`` bool mask of the views that exist in the reference (a light field read with
+    missing views); the mean is over those only, never over zero-filled stand-ins.
 
     Shape:
-        - ref, test: ``(*, U, V, H, W, C)``
+        - ref, test: ``(*, U, V, H, W, C)``; present: ``(U, V)``
         - output: ``(*)``
     """
     _check_lf_pair(ref, test)
-    per_view = psnr(ref, test, data_range)
-    if isinstance(per_view, torch.Tensor):
-        return per_view.mean(dim=(-2, -1))
-    return _mean_last2(per_view)
+    return _mean_views(psnr(ref, test, data_range), present)
 
 
-def mssim(ref, test, data_range: float | None = None):
-    """Mean SSIM over the views of a light field (seed Eq. 3.11).
+def mssim(ref, test, data_range: float | None = None, present=None):
+    """Mean SSIM over the (present) views of a light field (seed Eq. 3.11).
 
     Shape:
-        - ref, test: ``(*, U, V, H, W, C)``
+        - ref, test: ``(*, U, V, H, W, C)``; present: ``(U, V)``
         - output: ``(*)``
     """
     _check_lf_pair(ref, test)
-    per_view = ssim(ref, test, data_range)
+    return _mean_views(ssim(ref, test, data_range), present)
+
+
+def _mean_views(per_view, present):
+    """Mean over the last two (view) axes, over the ``present`` views only when given."""
+    if present is not None:
+        mask = np.asarray(present, bool)
+        if mask.shape != tuple(per_view.shape[-2:]) or not mask.any():
+            raise LFShapeError(f"present: expected a (U, V) mask with a True view, got {mask.shape}")
+        if isinstance(per_view, torch.Tensor):
+            return per_view[..., torch.as_tensor(mask, device=per_view.device)].mean(dim=-1)
+        m = np.asarray(per_view, np.float64)[..., mask].mean(axis=-1)
+        return float(m) if m.ndim == 0 else m
     if isinstance(per_view, torch.Tensor):
         return per_view.mean(dim=(-2, -1))
     return _mean_last2(per_view)

@@ -23,12 +23,13 @@ VIDEO_EXTS = (".mp4", ".mkv", ".avi", ".mov", ".webm", ".nut")
 #: Metadata key a mosaic video stores its view grid under ("UxV").
 GRID_METADATA_KEY = "comment"
 GRID_METADATA_PREFIX = "lfstream-grid="
+#: A video padded to even size for 4:2:0 records its true frame size ("HxW") here.
+SIZE_METADATA_PREFIX = "lfstream-size="
 
 
-def _parse_grid(value: str | None) -> tuple[int, int] | None:
-    if not value:
-        return None
-    m = re.search(re.escape(GRID_METADATA_PREFIX) + r"(\d+)x(\d+)", value)
+def _parse_pair(prefix: str, value: str | None) -> tuple[int, int] | None:
+    """``(a, b)`` of ``PREFIXaxb`` inside a metadata string, or ``None``."""
+    m = re.search(re.escape(prefix) + r"(\d+)x(\d+)", value or "")
     return (int(m.group(1)), int(m.group(2))) if m else None
 
 
@@ -49,23 +50,30 @@ def iter_video_frames(path: Path, max_frames: int | None = None) -> Iterator[np.
         if not container.streams.video:
             raise LFFormatError(f"{path}: has no video stream")
         stream = container.streams.video[0]
+        size = _parse_pair(SIZE_METADATA_PREFIX, _tags(container).get(GRID_METADATA_KEY))
         try:
             for i, frame in enumerate(container.decode(stream)):
                 if max_frames is not None and i >= max_frames:
                     break
-                yield frame.to_ndarray(format="rgb24")
+                img = frame.to_ndarray(format="rgb24")
+                yield img[: size[0], : size[1]] if size is not None else img
         except av.error.FFmpegError as exc:  # type: ignore[attr-defined]
             raise LFFormatError(f"{path}: video decoding failed ({exc})") from exc
+
+
+def _tags(container) -> dict[str, str]:
+    # Matroska upper-cases tag names, MP4 keeps them: look keys up case-insensitively.
+    tags = {k.lower(): v for k, v in container.metadata.items()}
+    if container.streams.video:
+        tags.update({k.lower(): v for k, v in container.streams.video[0].metadata.items()})
+    return tags
 
 
 def video_grid_and_fps(path: Path) -> tuple[tuple[int, int] | None, float | None]:
     """Reads the view grid stored in a mosaic video's metadata and its frame rate."""
     with _open_container(path) as container:
-        # Matroska upper-cases tag names, MP4 keeps them: look the key up case-insensitively.
-        tags = {k.lower(): v for k, v in container.metadata.items()}
-        if container.streams.video:
-            tags.update({k.lower(): v for k, v in container.streams.video[0].metadata.items()})
-        grid = _parse_grid(tags.get(GRID_METADATA_KEY))
+        tags = _tags(container)
+        grid = _parse_pair(GRID_METADATA_PREFIX, tags.get(GRID_METADATA_KEY))
         fps = None
         if container.streams.video and container.streams.video[0].average_rate:
             fps = float(container.streams.video[0].average_rate)
@@ -92,7 +100,8 @@ class VideoWriter:
     leaves a broken file and a closed one is always complete and playable.
 
     Codecs by extension and ``lossless``: FFV1 (``.mkv``/``.avi``/``.nut``) or x264 RGB at
-    QP 0 (``.mp4``/``.mov``) when lossless; x264 (yuv420p, yuv444p for odd sizes) at ``crf``
+    QP 0 (``.mp4``/``.mov``) when lossless; x264 yuv420p (plays everywhere; odd sizes padded,
+    the true size recorded and cropped back by :func:`iter_video_frames`) at ``crf``
     otherwise; ``.gif`` an animated GIF.
     """
 
@@ -120,19 +129,27 @@ class VideoWriter:
             codec, pix_fmt, options = ("ffv1", "bgr0", {}) if ext in (".mkv", ".avi", ".nut") else (
                 "libx264rgb", "rgb24", {"qp": "0", "preset": "veryfast"})
         else:
-            # 4:2:0 needs even sizes; odd-sized frames keep full chroma instead of being cropped.
-            pix_fmt = "yuv420p" if h % 2 == 0 and w % 2 == 0 else "yuv444p"
+            # yuv420p H.264 (High profile) plays in every browser and player; 4:2:0 needs even
+            # sizes, so odd frames are padded by edge replication and the true size is recorded
+            # (readers crop it back, see iter_video_frames)
+            pix_fmt = "yuv420p"
             codec, options = "libx264", {"crf": str(self._crf), "preset": self._preset}
+        ph, pw = (h + h % 2, w + w % 2) if pix_fmt == "yuv420p" else (h, w)
+        metadata = dict(self._metadata)
+        if (ph, pw) != (h, w):
+            note = f"{SIZE_METADATA_PREFIX}{h}x{w}"
+            metadata[GRID_METADATA_KEY] = f"{metadata[GRID_METADATA_KEY]} {note}" if GRID_METADATA_KEY in metadata else note
         try:
             self._container = av.open(str(self._tmp), mode="w")
-            for k, v in self._metadata.items():
+            for k, v in metadata.items():
                 self._container.metadata[k] = v
             self._stream = self._container.add_stream(codec, rate=Fraction(self._fps).limit_denominator(1001),
                                                       options=options)
-            self._stream.width, self._stream.height, self._stream.pix_fmt = w, h, pix_fmt
+            self._stream.width, self._stream.height, self._stream.pix_fmt = pw, ph, pix_fmt
         except (av.error.FFmpegError, OSError) as exc:  # type: ignore[attr-defined]
             raise LFFileError(f"{self.path}: cannot open for writing ({exc})") from exc
         self._size = (h, w)
+        self._padded = (ph, pw)
 
     def write(self, img: np.ndarray) -> None:
         import av
@@ -142,6 +159,9 @@ class VideoWriter:
         h, w = self._size
         if img.shape != (h, w, 3) or img.dtype != np.uint8:
             raise LFShapeError(f"{self.path}: every frame must be uint8 ({h}, {w}, 3), got {img.dtype} {img.shape}")
+        ph, pw = self._padded
+        if (ph, pw) != (h, w):
+            img = np.pad(img, ((0, ph - h), (0, pw - w), (0, 0)), mode="edge")
         try:
             frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(img), format="rgb24")
             for packet in self._stream.encode(frame):
@@ -208,5 +228,5 @@ def grid_metadata(views: tuple[int, int]) -> dict[str, str]:
     return {GRID_METADATA_KEY: f"{GRID_METADATA_PREFIX}{views[0]}x{views[1]}"}
 
 
-__all__ = ["VIDEO_EXTS", "GRID_METADATA_KEY", "GRID_METADATA_PREFIX", "VideoWriter", "write_video", "iter_video_frames",
-           "video_grid_and_fps", "read_mosaic_video", "grid_metadata"]
+__all__ = ["VIDEO_EXTS", "GRID_METADATA_KEY", "GRID_METADATA_PREFIX", "SIZE_METADATA_PREFIX", "VideoWriter",
+           "write_video", "iter_video_frames", "video_grid_and_fps", "read_mosaic_video", "grid_metadata"]

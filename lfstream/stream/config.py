@@ -15,7 +15,10 @@ from lfstream.optics import SEED_ALPHAS
 
 REFOCUS_MODES = ("auto", "refnet", "sas", "fourier", "none")
 TRANSPORTS = ("inproc", "file", "tcp")
-SAVE_KINDS = ("mp4", "png", "sweep", "lf")
+#: mp4: one H.264 yuv420p video per focal plane (plays everywhere); mp4-lossless: the same
+#: losslessly (x264 RGB, QP 0) for regression use; png: every plane of every frame; sweep:
+#: one video stepping through the planes; lf: the reconstructed light field (FFV1 mosaic).
+SAVE_KINDS = ("mp4", "mp4-lossless", "png", "sweep", "lf")
 #: Frames per network batch in the stream's decoder, and bounded-queue sizes.
 BATCH_RANGE = (1, 64)
 QUEUE_RANGE = (1, 256)

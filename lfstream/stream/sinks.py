@@ -26,10 +26,11 @@ class Sink:
     def write(self, f: StackFrame) -> None:
         cfg = self.config
         if f.stack is not None:
-            if "mp4" in cfg.save:
+            if "mp4" in cfg.save or "mp4-lossless" in cfg.save:
                 if not self._plane_writers:
-                    self._plane_writers = [VideoWriter(self.out / f"plane_{k:02d}.mp4", cfg.fps, lossless=False, crf=20,
-                                                       preset="veryfast") for k in range(len(f.stack))]
+                    lossless = "mp4-lossless" in cfg.save
+                    self._plane_writers = [VideoWriter(self.out / f"plane_{k:02d}.mp4", cfg.fps, lossless=lossless,
+                                                       crf=18, preset="veryfast") for k in range(len(f.stack))]
                 for w, img in zip(self._plane_writers, f.stack):
                     w.write(img)
             if "sweep" in cfg.save:

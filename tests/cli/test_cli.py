@@ -166,3 +166,26 @@ def test_stream_output_with_an_extension_is_refused(capsys, tmp_path):
     code, _, err = run(capsys, "stream", "-o", tmp_path / "out.xyz")
     assert code == 2 and "-o" in err and ".xyz" in err
     assert not (tmp_path / "out.xyz").exists()
+
+
+def test_baseline_metrics_count_present_views_only(capsys, tmp_path):
+    """A folder with missing views: the zero-filled stand-ins code perfectly (56 dB measured
+    before) and must not count; the score is the one over the views that exist."""
+    from lfstream.io import read_lf
+
+    star = shared("hci_star", "cotton")
+    if not star.exists():
+        pytest.skip("HCI sample not present")
+    code, out, _ = run(capsys, "baseline", star, "--allow-missing", "--views", "5", "--codec", "hevc", "--qp", "30",
+                       "--json")
+    assert code == 0
+    result = json.loads(out)
+    from lfstream.codec.baseline import decode_views, encode_views
+    from lfstream.metrics import psnr
+
+    lf, present = read_lf(star, crop=5, return_mask=True)
+    rec = decode_views(encode_views(lf, "hevc", 30), "hevc", (5, 5), lf.shape[2:4])
+    per_view = psnr(lf, rec)
+    assert result["views_measured"] == int(present.sum()) < 25
+    assert result["mpsnr"][0] == pytest.approx(float(per_view[present].mean()), abs=1e-6)
+    assert float(np.minimum(per_view, 100).mean()) > result["mpsnr"][0] + 3  # what counting all views gave

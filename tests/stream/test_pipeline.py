@@ -224,3 +224,26 @@ def test_builtin_clip_is_cached_and_identical_to_a_fresh_render(tmp_path, monkey
     next(gen)
     gen.close()
     assert len(list((tmp_path / "cache").glob("*seed10*"))) == 0
+
+
+def test_plane_videos_play_everywhere_and_lossless_is_an_option(tmp_path):
+    """Odd-sized views (375 x 540 in the default clip): the planes are yuv420p H.264 (not
+    High 4:4:4, which browsers and QuickTime refuse), padded to even size with the true
+    size recorded and cropped back by the reader; --save mp4-lossless keeps exact planes."""
+    import av
+
+    frames = list(synthetic_source(frames=2, views=3, size=(33, 47), seed=4))
+    out = prepare_output_dir(tmp_path / "lossy")
+    Pipeline(iter(frames), StreamConfig(refocus="sas", save=("mp4",), metrics=False), out).run()
+    with av.open(str(out / "plane_00.mp4")) as c:
+        s = c.streams.video[0]
+        assert s.codec_context.pix_fmt == "yuv420p" and "4:4:4" not in (s.codec_context.profile or "")
+    got = list(iter_video_frames(out / "plane_00.mp4"))
+    assert len(got) == 2 and got[0].shape == (33, 47, 3)
+    out2 = prepare_output_dir(tmp_path / "lossless")
+    Pipeline(iter(frames), StreamConfig(refocus="sas", save=("mp4-lossless",), metrics=False), out2).run()
+    from lfstream.refocus import focal_stack
+
+    exact = focal_stack(Decoder(Encoder().header((3, 3), (33, 47), 30.0)).decode_packet(
+        Encoder().encode_frame(frames[0], 0, 0)).lf)
+    assert np.array_equal(next(iter(iter_video_frames(out2 / "plane_00.mp4"))), exact[0])
