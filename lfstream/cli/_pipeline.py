@@ -57,8 +57,15 @@ def progress_callback(args: argparse.Namespace):
     return stderr_progress if (args.progress or (sys.stderr.isatty() and not args.json)) else None
 
 
+def interrupted_summary() -> dict:
+    """The summary of a run stopped (Ctrl-C) before any stage ran."""
+    return {"frames": 0, "fps": None, "wall_s": None, "bpp": None, "bytes": 0, "mpsnr": None, "mssim": None,
+            "per_frame": [], "mssim_frames": [], "stages": {}, "lost": 0, "transport": None, "refocus": None,
+            "skips": None, "interrupted": True, "outputs": []}
+
+
 def _text(summary: dict, out: Path | None) -> str:
-    lines = [f"{summary['frames']} frame(s), {summary['fps']} frames/s end to end"
+    lines = [f"{summary['frames']} frame(s), {summary['fps'] or 0} frames/s end to end"
              + (f", {summary['bpp']:.5f} bpp" if summary.get("bpp") else "")
              + (f", MPSNR {summary['mpsnr']:.2f} dB" if summary.get("mpsnr") is not None else "")
              + (f", MSSIM {summary['mssim']:.4f}" if summary.get("mssim") is not None else "")
@@ -83,4 +90,5 @@ def report(args: argparse.Namespace, summary: dict, out: Path | None) -> None:
     emit(args, summary, lambda s: _text(s, out))
 
 
-__all__ = ["add_pipeline_options", "check_output_folder", "pipeline_config", "progress_callback", "report"]
+__all__ = ["add_pipeline_options", "check_output_folder", "interrupted_summary", "pipeline_config", "progress_callback",
+           "report"]

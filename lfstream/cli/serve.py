@@ -9,6 +9,7 @@ from lfstream.cli._common import float_in, int_in
 from lfstream.cli._pipeline import (
     add_pipeline_options,
     check_output_folder,
+    interrupted_summary,
     pipeline_config,
     progress_callback,
     report,
@@ -39,7 +40,10 @@ def run(args: argparse.Namespace) -> int:
         receiver = TcpReceiver(args.host, args.port, timeout_s=args.timeout)
         if not args.json:
             print(f"listening on {receiver.address[0]}:{receiver.address[1]} -> {out}", file=sys.stderr)
-        summary = Pipeline(None, cfg, out, receiver=receiver, progress=progress_callback(args)).run()
+        try:
+            summary = Pipeline(None, cfg, out, receiver=receiver, progress=progress_callback(args)).run()
+        except KeyboardInterrupt:
+            summary = interrupted_summary()
         report(args, summary, out)
         if not args.keep_open or summary["interrupted"]:
             return 130 if summary["interrupted"] else 0

@@ -9,6 +9,7 @@ from lfstream.cli._common import add_read_options, int_in, read_options
 from lfstream.cli._pipeline import (
     add_pipeline_options,
     check_output_folder,
+    interrupted_summary,
     pipeline_config,
     progress_callback,
     report,
@@ -36,21 +37,26 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.stream.transport import TcpSender, parse_address
 
     check_output_folder(args.output)
-    fps = 30.0
-    if args.input is None:
-        source = synthetic_source(frames=args.frames)
-    else:
-        source, src_fps = file_source(args.input, read_options(args))
-        fps = src_fps or fps
-    cfg = pipeline_config(args, quality=args.quality, depth_hint=not args.no_depth_hint, transport=args.transport,
-                          fps=fps)
     sender, out = None, None
     if args.to:
         sender = TcpSender(*parse_address(args.to))
     else:
+        # the folder first: a Ctrl-C at any moment after this still leaves a labelled summary
         out = prepare_output_dir(args.output or fresh_dir("lfstream-out"))
-    pipe = Pipeline(source, cfg, out, sender=sender, progress=progress_callback(args),
-                    stream_file=(out / "stream.lfs") if out is not None else None)
-    summary = pipe.run()
+    try:
+        fps = 30.0
+        if args.input is None:
+            source = synthetic_source(frames=args.frames)
+        else:
+            source, src_fps = file_source(args.input, read_options(args))
+            fps = src_fps or fps
+        cfg = pipeline_config(args, quality=args.quality, depth_hint=not args.no_depth_hint, transport=args.transport,
+                              fps=fps)
+        pipe = Pipeline(source, cfg, out, sender=sender, progress=progress_callback(args),
+                        stream_file=(out / "stream.lfs") if out is not None else None)
+        summary = pipe.run()
+    except KeyboardInterrupt:
+        # Ctrl-C before the stages ran (reading the input, loading kernels)
+        summary = interrupted_summary()
     report(args, summary, out)
     return 130 if summary["interrupted"] else 0

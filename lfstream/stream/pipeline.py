@@ -55,6 +55,8 @@ from lfstream.stream.stages import (
 from lfstream.stream.transport import FileChannel, InprocChannel, LazyTcpSender, Receiver, Sender, TcpReceiver
 
 STAGE_NAMES = ("producer", "encoder", "decoder", "refocus", "sink", "metrics")
+#: After a stop (Ctrl-C), how long the pipeline waits for its stages to finish their item.
+STOP_GRACE_S = 10.0
 
 
 class Pipeline:
@@ -155,7 +157,11 @@ class Pipeline:
                     self.progress(self.status_line(last - t_start))
         except KeyboardInterrupt:
             self.stop()
-            deadline = time.perf_counter() + 1.5
+            # every stage sees the stop at its next item; wait for them (the longest item, an
+            # MSSIM of a large frame, takes ~2 s): a thread still inside native code when the
+            # interpreter exits aborts the process ("terminate called without an active
+            # exception") and leaves files unfinished
+            deadline = time.perf_counter() + STOP_GRACE_S
             for t in threads:
                 t.join(timeout=max(0.0, deadline - time.perf_counter()))
         wall = time.perf_counter() - t_start

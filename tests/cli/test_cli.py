@@ -189,3 +189,38 @@ def test_baseline_metrics_count_present_views_only(capsys, tmp_path):
     assert result["views_measured"] == int(present.sum()) < 25
     assert result["mpsnr"][0] == pytest.approx(float(per_view[present].mean()), abs=1e-6)
     assert float(np.minimum(per_view, 100).mean()) > result["mpsnr"][0] + 3  # what counting all views gave
+
+
+def test_ctrl_c_during_stream_exits_130_with_finalised_outputs(tmp_path):
+    """SIGINT mid-stream: exit status 130 within seconds, no abort, summary.json says
+    interrupted with the frames done, and every plane video is complete and playable."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from lfstream.io import iter_video_frames
+    from lfstream.synth import synth_clip
+
+    clip = tmp_path / "clip.npy"
+    np.save(clip, synth_clip(300, 5, (48, 64), seed=1).lf)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-c", "import sys; from lfstream.cli import main; sys.exit(main())",
+           "stream", str(clip), "-o", str(out), "--refocus", "sas", "--mssim-every", "0"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and not any(out.glob(".plane_00.*")):  # the stream is under way
+        time.sleep(0.05)
+    time.sleep(0.5)
+    t0 = time.time()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err[-2000:]
+    assert time.time() - t0 < 15
+    assert "terminate called" not in err and "Traceback" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and 0 < summary["frames"] < 300
+    videos = sorted(out.glob("plane_*.mp4"))
+    assert len(videos) == 16 and not list(out.glob(".*"))  # no temporary left behind
+    counts = {len(list(iter_video_frames(v))) for v in videos}
+    assert counts == {summary["frames"]}  # every plane holds every frame the summary counts
