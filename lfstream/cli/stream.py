@@ -33,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lfstream.io._fs import fresh_dir, prepare_output_dir
-    from lfstream.stream import Pipeline, file_source, synthetic_source
+    from lfstream.stream import Pipeline, Source, file_source, synthetic_source
     from lfstream.stream.transport import TcpSender, parse_address
 
     check_output_folder(args.output)
@@ -44,16 +44,15 @@ def run(args: argparse.Namespace) -> int:
         # the folder first: a Ctrl-C at any moment after this still leaves a labelled summary
         out = prepare_output_dir(args.output or fresh_dir("lfstream-out"))
     try:
-        fps = 30.0
         if args.input is None:
-            source = synthetic_source(frames=args.frames)
+            source = Source(synthetic_source(frames=args.frames), None, None, args.frames)
         else:
-            source, src_fps = file_source(args.input, read_options(args))
-            fps = src_fps or fps
+            source = file_source(args.input, read_options(args))
         cfg = pipeline_config(args, quality=args.quality, depth_hint=not args.no_depth_hint, transport=args.transport,
-                              fps=fps)
-        pipe = Pipeline(source, cfg, out, sender=sender, progress=progress_callback(args),
-                        stream_file=(out / "stream.lfs") if out is not None else None)
+                              fps=source.fps or 30.0)
+        pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=progress_callback(args),
+                        stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
+                        present=source.present)
         summary = pipe.run()
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)

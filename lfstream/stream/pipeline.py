@@ -72,6 +72,9 @@ class Pipeline:
             pipeline then starts at the transport.
         progress: a callable given a status line about twice a second.
         stream_file: the ``.lfs`` file of ``transport="file"``.
+        total_frames: how many frames the source holds, when known (the status line's ETA).
+        present: ``(U, V)`` mask of the source's views that exist (``None``: all); the
+            encoder needs the centre view only, the metrics count present views only.
 
     Attributes:
         stats: per stage name, its :class:`~lfstream.stream.report.StageStats` (live while running).
@@ -79,7 +82,8 @@ class Pipeline:
 
     def __init__(self, source: Iterator[np.ndarray] | None, config: StreamConfig, out: Path | None = None,
                  sender: Sender | None = None, receiver: Receiver | None = None,
-                 progress: Callable[[str], None] | None = None, stream_file: Path | None = None) -> None:
+                 progress: Callable[[str], None] | None = None, stream_file: Path | None = None,
+                 total_frames: int | None = None, present: np.ndarray | None = None) -> None:
         config.validate()
         self.config = config
         self.source = source
@@ -88,6 +92,8 @@ class Pipeline:
         self.receiver = receiver
         self.progress = progress
         self.stream_file = stream_file
+        self.total_frames = total_frames
+        self.present = present
         self.control = RunControl()
         self.stats = {name: StageStats(name) for name in STAGE_NAMES}
         self.interrupted = False
@@ -133,7 +139,7 @@ class Pipeline:
         if self.source is not None:
             stages.append(ProducerStage(ctl, self.stats["producer"], self.source, self.queues["encode"], originals))
             encoder = EncoderStage(ctl, self.stats["encoder"], self.queues["encode"], send_channel, cfg,
-                                   expect_frames=self.sender is None)
+                                   expect_frames=self.sender is None, present=self.present)
             stages.append(encoder)
         if self.sender is None:
             decoder = DecoderStage(ctl, self.stats["decoder"], recv_channel, self.queues["refocus"], cfg)
@@ -142,7 +148,7 @@ class Pipeline:
                              Sink(self.out, cfg) if self.out is not None else None, cfg.sink_delay_s)
             stages += [decoder, refocus, sink]
             if want_metrics:
-                metrics = MetricsStage(ctl, self.stats["metrics"], self.queues["metrics"], originals, cfg)
+                metrics = MetricsStage(ctl, self.stats["metrics"], self.queues["metrics"], originals, cfg, self.present)
                 stages.append(metrics)
         threads = [threading.Thread(target=s.run, name=s.name, daemon=True) for s in stages]
         for t in threads:
@@ -190,12 +196,18 @@ class Pipeline:
         )
 
     def status_line(self, elapsed: float) -> str:
-        """One line: elapsed time, frames and rate per stage, queue fill."""
-        parts = [f"{elapsed:6.1f} s"]
+        """One line: frames done (of the total, with an ETA, when known), frames/s, elapsed
+        time, frames per stage and queue fill."""
+        done = self.stats["sink" if self.sender is None else "encoder"].frames
+        rate = done / elapsed if elapsed > 0 else 0.0
+        head = f"frame {done}" + (f"/{self.total_frames}" if self.total_frames else "") + f" | {rate:.1f} frames/s"
+        if self.total_frames and rate > 0:
+            head += f" | ETA {max(self.total_frames - done, 0) / rate:.0f} s"
+        parts = [head, f"{elapsed:.1f} s"]
         for name in ("producer", "encoder", "decoder", "refocus", "sink"):
             s = self.stats[name]
             if s.frames:
-                parts.append(f"{name[:3]} {s.frames} ({s.frames / max(elapsed, 1e-9):.1f}/s)")
+                parts.append(f"{name[:3]} {s.frames}")
         parts.append("queues " + " ".join(f"{k[:3]} {q.qsize()}/{q.maxsize}" for k, q in self.queues.items()))
         return " | ".join(parts)
 

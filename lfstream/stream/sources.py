@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -86,21 +87,46 @@ def synthetic_source(frames: int = 24, views: int = 7, size: tuple[int, int] = (
                 tmp.unlink(missing_ok=True)  # a stream stopped early leaves no partial cache
 
 
-def file_source(path: str | os.PathLike, options: ReadOptions | None = None) -> tuple[Iterator[np.ndarray], float | None]:
-    """Frames of an LF file and its frame rate; mosaic videos are read lazily (one frame in
-    memory at a time)."""
+@dataclass
+class Source:
+    """The frames of a stream and what is known about them.
+
+    Attributes:
+        frames: iterator of ``(U, V, H, W, 3)`` uint8 frames.
+        fps: frame rate, when the source records one.
+        present: ``(U, V)`` mask of the views that exist (a folder with missing views read
+            with ``allow_missing``); ``None``: all views.
+        total: number of frames, when known (progress and ETA).
+    """
+
+    frames: Iterator[np.ndarray]
+    fps: float | None = None
+    present: np.ndarray | None = None
+    total: int | None = None
+
+
+def file_source(path: str | os.PathLike, options: ReadOptions | None = None) -> Source:
+    """The frames of an LF file; mosaic videos are read lazily (one frame in memory at a
+    time). With ``options.allow_missing`` a folder with missing views streams: the encoder
+    sends the centre view (which must exist) and the metrics count the present views only."""
     opts = options or ReadOptions()
     path = Path(path)
     if path.is_file() and path.suffix.lower() in VIDEO_EXTS and not opts.crop:
         grid, fps = video_grid_and_fps(path)
         grid = opts.grid or grid
         if grid is not None:
-            return (from_mosaic(f, grid) for f in iter_video_frames(path, opts.max_frames)), fps
+            frames = (from_mosaic(f, grid) for f in iter_video_frames(path, opts.max_frames))
+            return Source(frames, fps, None, opts.max_frames)
     loaded = load_lf(path, opts)
-    if loaded.present is not None and not loaded.present.all():
-        raise LFValueError(f"{path}: streaming needs every view (this source has {int((~loaded.present).sum())} missing)")
+    present = loaded.present
+    if present is not None and present.all():
+        present = None
+    if present is not None:
+        u, v = present.shape
+        if not present[u // 2, v // 2]:
+            raise LFValueError(f"{path}: the centre view is missing; it is the view the codec sends")
     lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
-    return iter(lf), loaded.fps
+    return Source(iter(lf), loaded.fps, present, len(lf))
 
 
-__all__ = ["BUILTIN_CLIP_VERSION", "cache_dir", "synthetic_source", "file_source"]
+__all__ = ["BUILTIN_CLIP_VERSION", "Source", "cache_dir", "synthetic_source", "file_source"]

@@ -187,9 +187,9 @@ class EncoderStage(ConsumerStage):
     name = "encoder"
 
     def __init__(self, control: RunControl, stats: StageStats, q_in: queue.Queue, channel: Sender,
-                 config: StreamConfig, expect_frames: bool) -> None:
+                 config: StreamConfig, expect_frames: bool, present: np.ndarray | None = None) -> None:
         super().__init__(control, stats, q_in)
-        self.channel, self.config, self.expect_frames = channel, config, expect_frames
+        self.channel, self.config, self.expect_frames, self.present = channel, config, expect_frames, present
         self.encoder = Encoder(quality=config.quality, depth_hint=config.depth_hint)
         self.rate = RateStats()
         self.started = False
@@ -199,7 +199,7 @@ class EncoderStage(ConsumerStage):
         if not self.started:
             self.channel.send_header(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
             self.started = True
-        packet = self.encoder.encode_frame(lf, item.seq, int(round(item.seq * 1e6 / self.config.fps)))
+        packet = self.encoder.encode_frame(lf, item.seq, int(round(item.seq * 1e6 / self.config.fps)), self.present)
         self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain), int(np.prod(lf.shape[:4])))
         return packet
 
@@ -333,9 +333,9 @@ class MetricsStage(ConsumerStage):
     name = "metrics"
 
     def __init__(self, control: RunControl, stats: StageStats, q_in: queue.Queue, originals: OriginalFrames,
-                 config: StreamConfig) -> None:
+                 config: StreamConfig, present: np.ndarray | None = None) -> None:
         super().__init__(control, stats, q_in)
-        self.originals, self.config = originals, config
+        self.originals, self.config, self.present = originals, config, present
         self.quality = QualityStats()
 
     def work(self, f: StackFrame) -> StackFrame | None:
@@ -347,12 +347,13 @@ class MetricsStage(ConsumerStage):
             return None
         rec = f.decoded.lf
         q = self.quality
-        q.mpsnr.append((f.seq, float(np.minimum(mpsnr(ref, rec), 100.0))))
+        # over the views that exist: a missing view is zero in the input, not a target
+        q.mpsnr.append((f.seq, float(np.minimum(mpsnr(ref, rec, present=self.present), 100.0))))
         every = self.config.mssim_every
         if every and f.seq % every == 0 and min(ref.shape[2:4]) >= 11:
-            q.mssim.append((f.seq, float(mssim(ref, rec))))
+            q.mssim.append((f.seq, float(mssim(ref, rec, present=self.present))))
             if f.stack is not None:
-                truth = focal_stack(ref, self.config.alphas)
+                truth = focal_stack(ref, self.config.alphas, present=self.present)
                 q.stack_psnr[f.seq] = float(np.mean(np.minimum(psnr(truth, f.stack), 100.0)))
         return f
 

@@ -224,3 +224,22 @@ def test_ctrl_c_during_stream_exits_130_with_finalised_outputs(tmp_path):
     assert len(videos) == 16 and not list(out.glob(".*"))  # no temporary left behind
     counts = {len(list(iter_video_frames(v))) for v in videos}
     assert counts == {summary["frames"]}  # every plane holds every frame the summary counts
+
+
+def test_stream_honours_allow_missing(capsys, tmp_path):
+    star = shared("hci_star", "cotton")
+    if not star.exists():
+        pytest.skip("HCI sample not present")
+    code, _, err = run(capsys, "stream", star, "-o", tmp_path / "a")
+    assert code == 2 and "missing" in err and "--allow-missing" in err
+    code, out, _ = run(capsys, "stream", star, "--allow-missing", "--views", "5", "-o", tmp_path / "b", "--json",
+                       "--refocus", "sas", "--mssim-every", "0")
+    assert code == 0
+    summary = json.loads(out)
+    import lfstream
+    from lfstream.metrics import mpsnr
+
+    lf, present = lfstream.read_lf(star, crop=5, return_mask=True)
+    rec = lfstream.decode(lfstream.encode(lf, present=present))[0]
+    assert summary["frames"] == 1
+    assert summary["mpsnr"] == pytest.approx(float(mpsnr(lf, rec, present=present)), abs=1e-6)

@@ -247,3 +247,14 @@ def test_plane_videos_play_everywhere_and_lossless_is_an_option(tmp_path):
     exact = focal_stack(Decoder(Encoder().header((3, 3), (33, 47), 30.0)).decode_packet(
         Encoder().encode_frame(frames[0], 0, 0)).lf)
     assert np.array_equal(next(iter(iter_video_frames(out2 / "plane_00.mp4"))), exact[0])
+
+
+def test_progress_line_shows_frames_rate_and_eta(tmp_path):
+    lines = []
+    pipe = Pipeline(small_source(frames=4), StreamConfig(refocus="sas", metrics=False, save=()), None,
+                    progress=lines.append, total_frames=4)
+    pipe.run()
+    line = pipe.status_line(2.0)
+    assert line.startswith("frame 4/4 | 2.0 frames/s | ETA 0 s"), line
+    pipe.total_frames = None
+    assert pipe.status_line(2.0).startswith("frame 4 | 2.0 frames/s |")
