@@ -6,15 +6,23 @@ import argparse
 import sys
 from pathlib import Path
 
-from lfstream.cli._common import emit, int_in
+from lfstream.cli._common import emit, int_in, parse_float_list
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
-from lfstream.stream.config import BATCH_RANGE, QUEUE_RANGE, REFOCUS_MODES, SAVE_KINDS, StreamConfig
+from lfstream.stream.config import BATCH_RANGE, FOCUS_MODES, QUEUE_RANGE, REFOCUS_MODES, SAVE_KINDS, StreamConfig
+
+
+def parse_focus(text: str) -> str | tuple[float, ...]:
+    """``auto``, ``seed`` or a comma list of alphas."""
+    return text if text in FOCUS_MODES else tuple(parse_float_list(text))
 
 
 def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", type=Path, help="output folder (default: a new ./lfstream-out[-N])")
     p.add_argument("--refocus", choices=REFOCUS_MODES, default="auto",
                    help="focal-stack renderer (auto: picked per device by measured speed and error)")
+    p.add_argument("--alphas", type=parse_focus, default="auto", metavar="auto|seed|A,B,...",
+                   help="focal planes: auto (default: the scene's own disparity range, planes a depth of field "
+                        "apart), seed (the seed's 0.125 ... 2.0) or a list of alphas")
     p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
     p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1, help="frames per network batch in the decoder")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto")
@@ -43,7 +51,8 @@ def check_output_folder(out: Path | None) -> None:
 
 def pipeline_config(args: argparse.Namespace, **extra) -> StreamConfig:
     """The :class:`StreamConfig` the flags describe (``extra``: fields only ``stream`` sets)."""
-    cfg = StreamConfig(refocus=args.refocus, device=args.device, batch=args.batch, depth=args.depth, hance=args.hance,
+    cfg = StreamConfig(refocus=args.refocus, alphas=args.alphas, device=args.device, batch=args.batch, depth=args.depth,
+                       hance=args.hance,
                        save=tuple(s for s in args.save.split(",") if s), skip_static=not args.no_skip_static,
                        skip_planes=args.skip_planes, mssim_every=args.mssim_every, queue_size=args.queue_size, **extra)
     cfg.validate()

@@ -66,4 +66,42 @@ def view_weights(u: int, v: int, weights, present) -> np.ndarray:
     return w
 
 
-__all__ = ["resolve_slopes", "slope_range", "check_slopes", "view_weights"]
+def plane_spacing(views: tuple[int, int]) -> float:
+    """The slope step at which neighbouring planes' depths of field touch: a point is sharp
+    (blur under one pixel) while ``|d - slope| * (N - 1) <= 1``, ``N`` the views across the
+    wider axis of the aperture, so planes ``1 / (N - 1)`` apart leave no depth unfocused."""
+    n = max(int(views[0]), int(views[1]), 2)
+    return 1.0 / (n - 1)
+
+
+def scene_slopes(disparity: np.ndarray, views: tuple[int, int], max_planes: int = 16, min_planes: int = 4,
+                 percentiles: tuple[float, float] = (2.0, 98.0)) -> np.ndarray:
+    """Focal planes that fit the scene: from the near to the far end of its disparity
+    (robust percentiles of the centre view's map), :func:`plane_spacing` apart, between
+    ``min_planes`` and ``max_planes`` of them (a deep scene gets wider spacing, a shallow
+    one is centred on its depth).
+
+    Shape:
+        - disparity: ``(H, W)`` px per view step
+        - output: ``(K,)`` float64 slopes, far (smallest) to near
+    """
+    d = np.asarray(disparity, np.float64)
+    finite = d[np.isfinite(d)]
+    lo, hi = np.percentile(finite, percentiles) if finite.size else (0.0, 0.0)
+    step = plane_spacing(views)
+    k = int(np.clip(np.ceil((hi - lo) / step) + 1, min_planes, max_planes))
+    centre, span = 0.5 * (lo + hi), max(hi - lo, step * (k - 1))
+    return np.linspace(centre - span / 2, centre + span / 2, k)
+
+
+def plane_records(slopes) -> list[dict]:
+    """``[{"index", "slope", "alpha"}]`` of focal planes, as reports record them (alpha
+    ``None`` for slopes >= 1, which no positive alpha reaches)."""
+    from lfstream.optics import alpha_from_slope
+
+    return [{"index": k, "slope": round(float(s), 6), "alpha": round(alpha_from_slope(float(s)), 6) if s < 1 else None}
+            for k, s in enumerate(np.asarray(slopes, np.float64))]
+
+
+__all__ = ["resolve_slopes", "slope_range", "check_slopes", "view_weights", "plane_spacing", "scene_slopes",
+           "plane_records"]

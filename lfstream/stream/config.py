@@ -11,9 +11,10 @@ from dataclasses import dataclass
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.errors import LFValueError
-from lfstream.optics import SEED_ALPHAS
 
 REFOCUS_MODES = ("auto", "refnet", "sas", "fourier", "none")
+#: Named focal-plane sets of StreamConfig.alphas (besides explicit alphas).
+FOCUS_MODES = ("auto", "seed")
 TRANSPORTS = ("inproc", "file", "tcp")
 #: mp4: one H.264 yuv420p video per focal plane (plays everywhere); mp4-lossless: the same
 #: losslessly (x264 RGB, QP 0) for regression use; png: every plane of every frame; sweep:
@@ -47,7 +48,8 @@ class StreamConfig:
     depth: str = "auto"
     hance: str = "auto"
     refocus: str = "auto"
-    alphas: tuple[float, ...] = SEED_ALPHAS
+    # "auto": planes fitted to the scene's disparity; "seed": the seed's sixteen alphas
+    alphas: tuple[float, ...] | str = "auto"
     batch: int = 1
     device: str = "cpu"
     queue_size: int = 4
@@ -67,6 +69,15 @@ class StreamConfig:
     def validate(self) -> None:
         """Raises :class:`LFValueError` naming the first field out of its range."""
         check_range("quality", self.quality, QUALITY_RANGE)
+        if isinstance(self.alphas, str):
+            check_choice("alphas", self.alphas, FOCUS_MODES)
+        else:
+            from lfstream.optics import check_alpha
+
+            if not self.alphas:
+                raise LFValueError("alphas: at least one, or 'auto' / 'seed'")
+            for a in self.alphas:
+                check_alpha(a)
         check_choice("depth", self.depth, DEPTH_MODES)
         check_choice("hance", self.hance, HANCE_MODES)
         check_choice("refocus", self.refocus, REFOCUS_MODES)
@@ -85,5 +96,5 @@ class StreamConfig:
         check_device(self.device)
 
 
-__all__ = ["StreamConfig", "REFOCUS_MODES", "TRANSPORTS", "SAVE_KINDS", "BATCH_RANGE", "QUEUE_RANGE", "check_range",
-           "check_choice"]
+__all__ = ["StreamConfig", "FOCUS_MODES", "REFOCUS_MODES", "TRANSPORTS", "SAVE_KINDS", "BATCH_RANGE", "QUEUE_RANGE",
+           "check_range", "check_choice"]

@@ -25,6 +25,7 @@ class StackFrame:
     decoded: DecodedFrame
     stack: np.ndarray | None = None  # (K, H, W, 3) uint8
     cheap_planes: list[int] = field(default_factory=list)
+    slopes: np.ndarray | None = None  # (K,) the planes the stack was rendered at
 
 
 __all__ = ["SourceFrame", "StackFrame"]

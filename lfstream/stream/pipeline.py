@@ -189,6 +189,8 @@ class Pipeline:
             receive=receive,
             transport="tcp" if self.sender is not None or self.receiver is not None else cfg.transport,
             refocus={"method": refocuser.method, "why": refocuser.reason} if refocuser is not None else None,
+            focal_planes=refocuser.planes() if refocuser is not None else [],
+            plane_updates=refocuser.updates if refocuser is not None else [],
             hance={"mode": cfg.hance, "ran": bool(decoder is not None and decoder.decoder is not None
                                                   and decoder.decoder.uses_hance)},
             interrupted=self.interrupted,

@@ -1,4 +1,5 @@
-"""The refocus stage's renderer: picks the focal-stack method and applies skip (b)."""
+"""The refocus stage's renderer: the focal planes (the scene's own range by default), the
+focal-stack method, and skip (b)."""
 
 from __future__ import annotations
 
@@ -14,24 +15,69 @@ from lfstream.optics import SEED_ALPHAS, slopes_from_alphas
 from lfstream.stream.config import StreamConfig
 from lfstream.stream.report import PlaneSkipStats
 
+#: Consecutive frames whose disparity range leaves the planes' range before they move.
+REFIT_AFTER_FRAMES = 3
+
 
 class Refocuser:
-    """Renders the focal stack of decoded frames with the chosen method and skip (b)."""
+    """Renders the focal stack of decoded frames with the chosen method and skip (b).
+
+    Focal planes: ``config.alphas == "auto"`` (the default) fits them to the scene on the
+    first frame (:func:`lfstream.refocus.scene_slopes`: its robust disparity range, planes
+    a depth of field apart) and keeps them while the scene stays in range — stable from
+    frame to frame — refitting (same number of planes) after the scene's range has left
+    them by more than a plane spacing for :data:`REFIT_AFTER_FRAMES` frames; ``"seed"``
+    the seed's sixteen alphas; a tuple, those alphas.
+    """
 
     def __init__(self, config: StreamConfig, views: tuple[int, int]) -> None:
         self.config = config
         self.views = views
-        self.slopes = slopes_from_alphas(config.alphas)
+        self.auto = config.alphas == "auto"
+        alphas = SEED_ALPHAS if config.alphas in ("auto", "seed") else config.alphas
+        self.slopes = slopes_from_alphas(alphas)
+        self.updates: list[dict] = []  # frame -> slopes, each time the planes were (re)fitted
+        self._outside = 0
         self.method = config.refocus
         self.reason = "requested"
         self.skips = PlaneSkipStats(enabled=config.skip_planes)
+
+    def fit_planes(self, f: DecodedFrame) -> None:
+        """Auto focus: fit the planes on the first frame, refit when the scene left them."""
+        if not self.auto:
+            return
+        from lfstream.refocus.planes import plane_spacing, scene_slopes
+
+        if not self.updates:
+            self._set_slopes(f.seq, scene_slopes(f.disparity, self.views))
+            return
+        lo, hi = np.percentile(f.disparity, [2, 98]) if f.disparity.size else (0.0, 0.0)
+        step = plane_spacing(self.views)
+        left = lo < self.slopes[0] - step or hi > self.slopes[-1] + step or \
+            (hi - lo) < 0.5 * (self.slopes[-1] - self.slopes[0]) - step
+        self._outside = self._outside + 1 if left else 0
+        if self._outside >= REFIT_AFTER_FRAMES:
+            k = len(self.slopes)
+            self._set_slopes(f.seq, scene_slopes(f.disparity, self.views, max_planes=k, min_planes=k))
+            self._outside = 0
+
+    def _set_slopes(self, seq: int, slopes: np.ndarray) -> None:
+        self.slopes = np.asarray(slopes, np.float64)
+        self.updates.append({"frame": int(seq), "slopes": [round(float(s), 6) for s in self.slopes]})
+
+    def planes(self) -> list[dict]:
+        """The current planes: index, slope and alpha (``None`` for slopes >= 1)."""
+        from lfstream.refocus.planes import plane_records
+
+        return plane_records(self.slopes)
 
     def _refnet_applicable(self) -> bool:
         from lfstream.models.registry import manifest_entry
 
         entry = manifest_entry("refnet", "fast")
+        seed = slopes_from_alphas(SEED_ALPHAS)
         return (entry is not None and tuple(entry["config"]["views"]) == tuple(self.views)
-                and np.allclose(self.config.alphas, SEED_ALPHAS))
+                and self.slopes.shape == seed.shape and np.allclose(self.slopes, seed))
 
     def choose(self, lf: np.ndarray) -> None:
         """``auto``: RefNet when it is applicable, faster than SaS on this device and within
@@ -43,10 +89,12 @@ class Refocuser:
 
         if self.method != "auto":
             if self.method == "refnet" and not self._refnet_applicable():
-                raise LFValueError("refocus=refnet: the shipped RefNet takes 7x7 views and the seed's 16 alphas")
+                raise LFValueError("refocus=refnet: the shipped RefNet takes 7x7 views and the seed's 16 alphas "
+                                   "(--alphas seed)")
             return
         if not self._refnet_applicable():
-            self.method, self.reason = "sas", "RefNet not applicable (grid or alphas differ from its training)"
+            self.method, self.reason = "sas", ("RefNet not applicable (it renders the seed's 16 alphas of 7x7 views; "
+                                               "the planes or the grid differ)")
             return
         key = self._choice_key(lf)
         cached = _read_choices().get(key)
@@ -54,9 +102,9 @@ class Refocuser:
             self.method = cached["method"]
             self.reason = f"{cached['reason']} (measured on an earlier run on this machine, cached)"
             return
-        focal_stack(lf, self.config.alphas)  # warm-up: the kernels load before anything is timed
+        focal_stack(lf, slopes=self.slopes)  # warm-up: the kernels load before anything is timed
         t0 = time.perf_counter()
-        ref = focal_stack(lf, self.config.alphas)
+        ref = focal_stack(lf, slopes=self.slopes)
         t_sas = time.perf_counter() - t0
         focal_stack(lf, method="refnet", device=self.config.device)  # warm-up
         t0 = time.perf_counter()
@@ -91,7 +139,7 @@ class Refocuser:
         lf = f.lf
         if self.method in ("refnet", "fourier") or not self.config.skip_planes:
             extra = {"device": self.config.device} if self.method == "refnet" else {}
-            return focal_stack(lf, self.config.alphas, method=self.method, **extra), []
+            return focal_stack(lf, slopes=self.slopes, method=self.method, **extra), []
         d = f.disparity
         lo, hi = (np.percentile(d, [1, 99]) if d.size else (0.0, 0.0))
         margin = self.config.plane_margin

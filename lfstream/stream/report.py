@@ -87,7 +87,8 @@ class QualityStats:
 def build_summary(*, wall_s: float, frames: int, stages: dict[str, StageStats], rate: RateStats,
                   quality: QualityStats, static: StaticSkipStats, planes: PlaneSkipStats,
                   receive: dict | None, transport: str, refocus: dict | None, hance: dict,
-                  interrupted: bool, outputs: list[str]) -> dict:
+                  interrupted: bool, outputs: list[str], focal_planes: list[dict] | None = None,
+                  plane_updates: list[dict] | None = None) -> dict:
     """The summary a run returns and writes as ``summary.json`` (keys are a contract)."""
     out = {
         "frames": frames,
@@ -103,6 +104,8 @@ def build_summary(*, wall_s: float, frames: int, stages: dict[str, StageStats], 
         "lost": receive["lost"] if receive else 0,
         "transport": {"kind": transport, **(receive or {})},
         "refocus": refocus,
+        "planes": focal_planes or [],  # index, slope, alpha of every focal plane (as at the end)
+        "plane_updates": plane_updates or [],  # frame and slopes each time the planes were fitted
         "skips": {"static_frames": static.as_dict(), "out_of_range_planes": planes.as_dict(), "jpeg_hance": hance},
         "interrupted": interrupted,
         "outputs": outputs,

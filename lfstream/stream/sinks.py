@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+
+import cv2
+import numpy as np
 
 from lfstream.errors import LFFileError, LFStreamError
 from lfstream.io import VideoWriter, grid_metadata, write_image
+from lfstream.io._fs import atomic_write_text
 from lfstream.lightfield import to_mosaic
 from lfstream.stream.config import StreamConfig
 from lfstream.stream.frames import StackFrame
@@ -13,7 +18,10 @@ from lfstream.stream.frames import StackFrame
 
 class Sink:
     """Writes focal stacks (MP4 per plane, PNG per plane and frame, a focal-sweep MP4) and
-    optionally the reconstructed LF (lossless FFV1 mosaic video)."""
+    optionally the reconstructed LF (lossless FFV1 mosaic video); beside them
+    ``planes.json`` (every plane's index, slope and alpha, and the frames where the planes
+    were fitted) and ``contact_sheet.png`` (the first frame's stack at a glance). Each plane
+    MP4 records its plane in the ``comment`` tag."""
 
     def __init__(self, out: Path, config: StreamConfig) -> None:
         self.out = out
@@ -22,15 +30,34 @@ class Sink:
         self._plane_writers: list = []
         self._sweep = None
         self._lf_writer = None
+        self._plane_log: list[dict] = []  # frame and slopes, whenever the planes changed
+        self._slopes = None  # the latest planes
+
+    def _note_planes(self, f: StackFrame) -> None:
+        slopes = [round(float(s), 6) for s in f.slopes] if f.slopes is not None else []
+        if f.slopes is not None:
+            self._slopes = f.slopes
+        if not self._plane_log or self._plane_log[-1]["slopes"] != slopes:
+            self._plane_log.append({"frame": f.seq, "slopes": slopes})
+            if len(self._plane_log) == 1 and slopes:
+                self._contact_sheet(f.stack, slopes)
+
+    def _contact_sheet(self, stack, slopes: list[float]) -> None:
+        path = self.out / "contact_sheet.png"
+        write_image(path, contact_sheet(stack, slopes))
+        self.files.append(str(path))
 
     def write(self, f: StackFrame) -> None:
         cfg = self.config
         if f.stack is not None:
+            self._note_planes(f)
             if "mp4" in cfg.save or "mp4-lossless" in cfg.save:
                 if not self._plane_writers:
                     lossless = "mp4-lossless" in cfg.save
-                    self._plane_writers = [VideoWriter(self.out / f"plane_{k:02d}.mp4", cfg.fps, lossless=lossless,
-                                                       crf=18, preset="veryfast") for k in range(len(f.stack))]
+                    self._plane_writers = [
+                        VideoWriter(self.out / f"plane_{k:02d}.mp4", cfg.fps, lossless=lossless, crf=18, preset="veryfast",
+                                    metadata={"comment": plane_label(k, s)})
+                        for k, s in enumerate(self._plane_log[-1]["slopes"] or [None] * len(f.stack))]
                 for w, img in zip(self._plane_writers, f.stack):
                     w.write(img)
             if "sweep" in cfg.save:
@@ -53,6 +80,16 @@ class Sink:
     def close(self) -> None:
         """Finalises every open file (also after an error or Ctrl-C)."""
         errors = []
+        if self._slopes is not None:
+            from lfstream.refocus.planes import plane_records
+
+            planes = plane_records(self._slopes)
+            try:
+                atomic_write_text(self.out / "planes.json", json.dumps({"planes": planes, "updates": self._plane_log},
+                                                                        indent=1))
+                self.files.append(str(self.out / "planes.json"))
+            except LFStreamError as exc:
+                errors.append(str(exc))
         for w in [*self._plane_writers, self._sweep, self._lf_writer]:
             if w is None:
                 continue
@@ -66,4 +103,37 @@ class Sink:
             raise LFFileError("; ".join(errors))
 
 
-__all__ = ["Sink"]
+def plane_label(index: int, slope: float | None) -> str:
+    """``lfstream-plane=K slope=S alpha=A``: what a plane video records about its plane."""
+    if slope is None:
+        return f"lfstream-plane={index}"
+    from lfstream.optics import alpha_from_slope
+
+    alpha = f"{alpha_from_slope(slope):.4g}" if slope < 1 else "none"
+    return f"lfstream-plane={index} slope={slope:+.4f} alpha={alpha}"
+
+
+def contact_sheet(stack: np.ndarray, slopes: list[float], columns: int = 4, width: int = 240) -> np.ndarray:
+    """One image of a focal stack: the planes as labelled thumbnails, row by row.
+
+    Shape:
+        - stack: ``(K, H, W, 3)`` uint8
+        - output: ``(rows * (h + 18), columns * w, 3)`` uint8, ``w <= width``
+    """
+    k, h, w = stack.shape[:3]
+    scale = min(1.0, width / w)
+    tw, th = max(1, int(round(w * scale))), max(1, int(round(h * scale)))
+    cols = min(columns, k)
+    rows = -(-k // cols)
+    label_h = 18
+    sheet = np.full((rows * (th + label_h), cols * tw, 3), 255, np.uint8)
+    for i, (img, s) in enumerate(zip(stack, slopes)):
+        r, c = divmod(i, cols)
+        y, x = r * (th + label_h), c * tw
+        sheet[y + label_h:y + label_h + th, x:x + tw] = cv2.resize(img, (tw, th), interpolation=cv2.INTER_AREA)
+        cv2.putText(sheet, f"{i}: slope {s:+.2f}", (x + 3, y + 13), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1,
+                    cv2.LINE_AA)
+    return sheet
+
+
+__all__ = ["Sink", "plane_label", "contact_sheet"]

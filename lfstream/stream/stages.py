@@ -295,9 +295,12 @@ class RefocusStage(ConsumerStage):
     def work(self, f: DecodedFrame) -> StackFrame:
         if self.refocuser is None:
             self.refocuser = Refocuser(self.config, tuple(f.lf.shape[:2]))
+            self.refocuser.fit_planes(f)
             self.refocuser.choose(f.lf)
+        else:
+            self.refocuser.fit_planes(f)
         stack, cheap = self.refocuser.render(f)
-        return StackFrame(f.seq, f, stack, cheap)
+        return StackFrame(f.seq, f, stack, cheap, self.refocuser.slopes.copy())
 
 
 class SinkStage(ConsumerStage):
@@ -353,7 +356,7 @@ class MetricsStage(ConsumerStage):
         if every and f.seq % every == 0 and min(ref.shape[2:4]) >= 11:
             q.mssim.append((f.seq, float(mssim(ref, rec, present=self.present))))
             if f.stack is not None:
-                truth = focal_stack(ref, self.config.alphas, present=self.present)
+                truth = focal_stack(ref, slopes=f.slopes, present=self.present)
                 q.stack_psnr[f.seq] = float(np.mean(np.minimum(psnr(truth, f.stack), 100.0)))
         return f
 

@@ -221,7 +221,7 @@ def test_ctrl_c_during_stream_exits_130_with_finalised_outputs(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is True and 0 < summary["frames"] < 300
     videos = sorted(out.glob("plane_*.mp4"))
-    assert len(videos) == 16 and not list(out.glob(".*"))  # no temporary left behind
+    assert len(videos) == len(summary["planes"]) >= 4 and not list(out.glob(".*"))  # no temporary left behind
     counts = {len(list(iter_video_frames(v))) for v in videos}
     assert counts == {summary["frames"]}  # every plane holds every frame the summary counts
 

@@ -220,3 +220,21 @@ def test_all_in_focus_picks_each_pixels_plane():
     np.testing.assert_allclose(aif2[:, 32:].astype(int), stack[1, :, 32:].astype(int), atol=1)
     with pytest.raises(LFValueError):
         all_in_focus(lf, d[:10])
+
+
+def test_scene_slopes_span_the_scene_a_depth_of_field_apart():
+    from lfstream.refocus import plane_spacing, scene_slopes
+
+    d = np.linspace(-1.0, 1.0, 10_000).reshape(100, 100)
+    s = scene_slopes(d, (7, 7))
+    step = plane_spacing((7, 7))
+    assert step == pytest.approx(1 / 6)
+    assert s[0] <= -0.95 and s[-1] >= 0.95 and np.allclose(np.diff(s), np.diff(s)[0])
+    assert np.diff(s)[0] <= step + 1e-12  # neighbouring depths of field touch
+    flat = scene_slopes(np.full((8, 8), 0.3), (5, 5))  # a single depth: min_planes around it
+    assert len(flat) == 4 and np.mean(flat) == pytest.approx(0.3)
+    deep = scene_slopes(np.linspace(-8, 8, 400).reshape(20, 20), (9, 9))
+    assert len(deep) == 16 and deep[0] < -7 and deep[-1] > 7  # capped: wider spacing
+    outliers = np.zeros((100, 100))
+    outliers[0, :5] = 40.0  # 0.05 % of the pixels: ignored by the robust range
+    assert scene_slopes(outliers, (7, 7)).max() < 1

@@ -241,7 +241,7 @@ def test_plane_videos_play_everywhere_and_lossless_is_an_option(tmp_path):
     got = list(iter_video_frames(out / "plane_00.mp4"))
     assert len(got) == 2 and got[0].shape == (33, 47, 3)
     out2 = prepare_output_dir(tmp_path / "lossless")
-    Pipeline(iter(frames), StreamConfig(refocus="sas", save=("mp4-lossless",), metrics=False), out2).run()
+    Pipeline(iter(frames), StreamConfig(refocus="sas", alphas="seed", save=("mp4-lossless",), metrics=False), out2).run()
     from lfstream.refocus import focal_stack
 
     exact = focal_stack(Decoder(Encoder().header((3, 3), (33, 47), 30.0)).decode_packet(
@@ -258,3 +258,35 @@ def test_progress_line_shows_frames_rate_and_eta(tmp_path):
     assert line.startswith("frame 4/4 | 2.0 frames/s | ETA 0 s"), line
     pipe.total_frames = None
     assert pipe.status_line(2.0).startswith("frame 4 | 2.0 frames/s |")
+
+
+def test_auto_focal_planes_fit_the_scene_and_are_recorded(tmp_path):
+    """The default planes span the scene's disparity (not the seed's -7 ... +0.5 slopes),
+    a depth of field apart, stay put over a steady clip, and are recorded in the summary,
+    in planes.json, in each plane video's metadata and in a contact sheet."""
+    import av
+
+    from lfstream.refocus import plane_spacing
+    from lfstream.synth import synth_clip
+
+    clip = synth_clip(4, 5, (64, 96), seed=3, motion=0.3, camera_pan=0.1, disparity_range=(-1.0, 1.5))
+    out = prepare_output_dir(tmp_path / "auto")
+    summary = Pipeline(iter(clip.lf), StreamConfig(refocus="sas", mssim_every=0), out).run()
+    slopes = np.array([p["slope"] for p in summary["planes"]])
+    gt = clip.disparity[0, 2, 2]
+    lo, hi = np.percentile(gt, [2, 98])
+    assert 4 <= len(slopes) <= 16 and np.all(np.diff(slopes) > 0)
+    assert slopes[0] <= lo + 0.3 and slopes[-1] >= hi - 0.3  # the scene's range is covered ...
+    assert slopes[0] > -2.5 and slopes[-1] < 2.5  # ... and not the seed's -7 ... +0.5
+    assert np.diff(slopes).max() <= plane_spacing((5, 5)) + 1e-9 or len(slopes) == 16
+    assert [u["frame"] for u in summary["plane_updates"]] == [0]  # stable over a steady clip
+    for p in summary["planes"]:  # slopes >= 1 (nearer than alpha -> infinity) have no alpha
+        assert p["alpha"] == (pytest.approx(1 / (1 - p["slope"]), rel=1e-4) if p["slope"] < 1 else None)
+    sidecar = json.loads((out / "planes.json").read_text())
+    assert sidecar["planes"] == summary["planes"]
+    with av.open(str(out / "plane_00.mp4")) as c:
+        assert f"slope={slopes[0]:+.4f}" in c.metadata.get("comment", "")
+    assert (out / "contact_sheet.png").exists() and str(out / "contact_sheet.png") in summary["outputs"]
+    # the seed's stack on request
+    seed = Pipeline(iter(clip.lf), StreamConfig(refocus="sas", alphas="seed", metrics=False, save=()), None).run()
+    assert len(seed["planes"]) == 16 and seed["planes"][0]["alpha"] == pytest.approx(0.125)
