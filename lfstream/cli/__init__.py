@@ -14,6 +14,7 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
+from lfstream.cli._common import int_in
 from lfstream.errors import LFStreamError
 
 #: The subcommands, in the order ``--help`` lists them: name -> module. Each module has
@@ -49,7 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Light-field video: read, simulate, compress, reconstruct and refocus.",
     )
     parser.add_argument("--version", action="version", version=f"lfstream {__version__}")
-    parser.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's choice)")
+    parser.add_argument("--threads", type=int_in((1, 1024)), help="torch intra-op threads (default: torch's choice)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, module_name in COMMANDS.items():
         module = importlib.import_module(module_name)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.cli._common import add_read_options, emit, load_from_args
+from lfstream.cli._common import add_read_options, emit, float_in, load_from_args
 from lfstream.codec.baseline import CODECS, ORDERS
 from lfstream.errors import LFValueError
 
@@ -19,8 +19,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path)
     p.add_argument("--codec", choices=tuple(CODECS), default="hevc")
     rate = p.add_mutually_exclusive_group()
-    rate.add_argument("--qp", type=float, help="HEVC: constant QP 0..51; AV1: CRF 1..63 (default 34)")
-    rate.add_argument("--bpp", type=float, help="search the quality parameter for this bits per pixel")
+    rate.add_argument("--qp", type=float_in(0, 63), help="HEVC: constant QP 0..51; AV1: CRF 1..63 (default 34)")
+    rate.add_argument("--bpp", type=float_in(1e-6, 24), help="search the quality parameter for this bits per pixel")
     p.add_argument("--order", choices=ORDERS, default="raster")
     p.add_argument("-o", "--output", type=Path, help="write the decoded light field (.npy, folder or video)")
     p.add_argument("--overwrite", action="store_true")

@@ -6,18 +6,20 @@ import argparse
 
 import numpy as np
 
-from lfstream.cli._common import emit
+from lfstream.cli._common import emit, float_in, int_in
+from lfstream.lightfield import MAX_VIEWS_PER_AXIS
 
 HELP = "plenoptic camera -> equivalent camera array, refocus distance and depth of field"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--focal-length", type=float, required=True, metavar="MM", help="main-lens focal length")
-    p.add_argument("--f-number", type=float, required=True)
-    p.add_argument("--microlenses", type=int, required=True, metavar="M", help="microlenses per axis")
-    p.add_argument("--pixels-per-lens", type=int, required=True, metavar="N", help="pixels per axis under a microlens")
-    p.add_argument("--pixel-pitch", type=float, metavar="MM", help="default: microlens pitch / N")
-    p.add_argument("--microlens-pitch", type=float, metavar="MM", help="default: aperture / M")
+    p.add_argument("--focal-length", type=float_in(1e-3, 1e6), required=True, metavar="MM", help="main-lens focal length")
+    p.add_argument("--f-number", type=float_in(0.1, 1000), required=True)
+    p.add_argument("--microlenses", type=int_in((1, 1 << 20)), required=True, metavar="M", help="microlenses per axis")
+    p.add_argument("--pixels-per-lens", type=int_in((1, MAX_VIEWS_PER_AXIS)), required=True, metavar="N",
+                   help="pixels per axis under a microlens")
+    p.add_argument("--pixel-pitch", type=float_in(1e-9, 1e3), metavar="MM", help="default: microlens pitch / N")
+    p.add_argument("--microlens-pitch", type=float_in(1e-9, 1e3), metavar="MM", help="default: aperture / M")
     p.add_argument("--focus-distance", type=float, default=float("inf"), metavar="M",
                    help="main-lens focus in metres (default infinity)")
     p.add_argument("--slope", type=float, nargs="+", action="extend", default=[], metavar="S",

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.cli._common import add_read_options, emit, load_from_args, parse_float_list
+from lfstream.cli._common import add_read_options, emit, float_in, load_from_args, parse_float_list
 from lfstream.errors import LFFileError, LFValueError
 from lfstream.io._fs import prepare_output_dir
 
@@ -26,9 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="N slopes evenly spaced from LO to HI (a focus range in disparity units)")
     p.add_argument("--method", choices=METHODS, default="sas")
     p.add_argument("--device", default="cpu", help="where RefNet runs (method refnet)")
-    p.add_argument("--aperture", type=float, help="synthetic aperture radius in view steps (default: all views)")
+    p.add_argument("--aperture", type=float_in(1e-6, 1e6), help="synthetic aperture radius in view steps (default: all views)")
     p.add_argument("--aperture-shape", choices=("circle", "square", "gaussian"), default="circle")
-    p.add_argument("--fps", type=float, default=8.0, help="frame rate of the focal sweep")
+    p.add_argument("--fps", type=float_in(1e-3, 1000), default=8.0, help="frame rate of the focal sweep")
     p.add_argument("--no-sweep", action="store_true", help="skip the MP4/GIF focal sweep")
     add_read_options(p)
     p.add_argument("--json", action="store_true")

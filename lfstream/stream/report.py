@@ -124,7 +124,8 @@ def build_summary(*, wall_s: float, frames: int, stages: dict[str, StageStats], 
 
 def write_summary(out: Path, summary: dict) -> None:
     """``summary.json`` in ``out``, written atomically."""
-    atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=2, default=str))
+    # strict JSON (RFC 8259): the summary caps PSNR, and a non-finite value left would be a bug
+    atomic_write_text(Path(out) / "summary.json", json.dumps(summary, indent=2, default=str, allow_nan=False))
 
 
 def stderr_progress(line: str) -> None:

@@ -124,7 +124,7 @@ def test_numeric_options_are_range_checked_by_the_parser(capsys, argv, flag):
 
 def test_baseline_qp_outside_the_codecs_range_is_one_line(capsys, tmp_path, rng):
     np.save(tmp_path / "lf.npy", random_lf(rng, (3, 3, 16, 16, 3)))
-    code, out, err = run(capsys, "baseline", tmp_path / "lf.npy", "--codec", "hevc", "--qp", "99")
+    code, out, err = run(capsys, "baseline", tmp_path / "lf.npy", "--codec", "hevc", "--qp", "55")
     assert code == 2 and "--qp" in err and "0..51" in err and len(err.strip().splitlines()) == 1
 
 
@@ -243,3 +243,33 @@ def test_stream_honours_allow_missing(capsys, tmp_path):
     rec = lfstream.decode(lfstream.encode(lf, present=present))[0]
     assert summary["frames"] == 1
     assert summary["mpsnr"] == pytest.approx(float(mpsnr(lf, rec, present=present)), abs=1e-6)
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["synth", "x.npz", "--vignetting", "2"], "--vignetting"),
+    (["synth", "x.npz", "--views", "0"], "--views"),
+    (["refocus", "x", "-o", "y", "--aperture", "-1"], "--aperture"),
+    (["optics", "--focal-length", "-1", "--f-number", "2", "--microlenses", "5", "--pixels-per-lens", "5"],
+     "--focal-length"),
+    (["--threads", "0", "info", "x"], "--threads"),
+    (["baseline", "x", "--bpp", "0"], "--bpp"),
+])
+def test_more_numeric_options_are_range_checked(capsys, argv, flag):
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and flag in err and len(err.strip().splitlines()) == 1
+
+
+def test_progress_is_shown_on_a_terminal_unless_json(monkeypatch):
+    import argparse
+    import sys
+
+    from lfstream.cli._pipeline import progress_callback
+
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert progress_callback(argparse.Namespace(progress=False, json=False)) is not None
+    assert progress_callback(argparse.Namespace(progress=False, json=True)) is None
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: False)
+    assert progress_callback(argparse.Namespace(progress=False, json=False)) is None
+    assert progress_callback(argparse.Namespace(progress=True, json=False)) is not None
