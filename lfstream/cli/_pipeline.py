@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from lfstream.cli._common import emit, int_in, parse_float_list
+from lfstream.cli._common import emit, float_in, int_in, parse_float_list
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
 from lfstream.stream.config import BATCH_RANGE, FOCUS_MODES, QUEUE_RANGE, REFOCUS_MODES, SAVE_KINDS, StreamConfig
 
@@ -27,6 +27,11 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1, help="frames per network batch in the decoder")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto")
+    cam = p.add_argument_group("camera (optional: each focal plane then records its refocus distance)")
+    cam.add_argument("--focal-length", type=float_in(1e-3, 1e6), metavar="MM", help="main-lens focal length")
+    cam.add_argument("--f-number", type=float_in(0.1, 1000), help="main-lens f-number")
+    cam.add_argument("--microlenses", type=int_in((1, 1 << 20)), metavar="M", help="microlenses per axis")
+    cam.add_argument("--pixels-per-lens", type=int_in((1, 64)), metavar="N", help="pixels per axis under a microlens")
     p.add_argument("--save", default="mp4", help=f"comma list of {', '.join(SAVE_KINDS)} "
                    "(mp4: one per focal plane)")
     p.add_argument("--no-skip-static", action="store_true", help="always recompute the disparity")
@@ -49,9 +54,26 @@ def check_output_folder(out: Path | None) -> None:
                            f"summary.json); give a name without the extension {out.suffix!r}")
 
 
+def camera_from_args(args: argparse.Namespace):
+    """The :class:`~lfstream.optics.PlenopticCamera` the camera flags describe, or ``None``."""
+    given = [args.focal_length, args.f_number, args.microlenses, args.pixels_per_lens]
+    if not any(x is not None for x in given):
+        return None
+    if any(x is None for x in given):
+        from lfstream.errors import LFValueError
+
+        raise LFValueError("--focal-length, --f-number, --microlenses and --pixels-per-lens go together "
+                           "(the camera that captured the input)")
+    from lfstream.optics import PlenopticCamera
+
+    return PlenopticCamera(focal_length_mm=args.focal_length, f_number=args.f_number, microlenses=args.microlenses,
+                           pixels_per_lens=args.pixels_per_lens)
+
+
 def pipeline_config(args: argparse.Namespace, **extra) -> StreamConfig:
     """The :class:`StreamConfig` the flags describe (``extra``: fields only ``stream`` sets)."""
-    cfg = StreamConfig(refocus=args.refocus, alphas=args.alphas, device=args.device, batch=args.batch, depth=args.depth,
+    cfg = StreamConfig(camera=camera_from_args(args), refocus=args.refocus, alphas=args.alphas, device=args.device,
+                       batch=args.batch, depth=args.depth,
                        hance=args.hance,
                        save=tuple(s for s in args.save.split(",") if s), skip_static=not args.no_skip_static,
                        skip_planes=args.skip_planes, mssim_every=args.mssim_every, queue_size=args.queue_size, **extra)

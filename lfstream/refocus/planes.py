@@ -94,13 +94,24 @@ def scene_slopes(disparity: np.ndarray, views: tuple[int, int], max_planes: int 
     return np.linspace(centre - span / 2, centre + span / 2, k)
 
 
-def plane_records(slopes) -> list[dict]:
+def plane_records(slopes, camera=None) -> list[dict]:
     """``[{"index", "slope", "alpha"}]`` of focal planes, as reports record them (alpha
-    ``None`` for slopes >= 1, which no positive alpha reaches)."""
-    from lfstream.optics import alpha_from_slope
+    ``None`` for slopes >= 1, which no positive alpha reaches); with a
+    :class:`~lfstream.optics.PlenopticCamera` also ``distance_m``, ``dof_near_m`` and
+    ``dof_far_m`` (metres from the microlens array; ``None`` at or beyond infinity)."""
+    from lfstream.optics import alpha_from_slope, refocus_plane
 
-    return [{"index": k, "slope": round(float(s), 6), "alpha": round(alpha_from_slope(float(s)), 6) if s < 1 else None}
-            for k, s in enumerate(np.asarray(slopes, np.float64))]
+    def metres(x: float) -> float | None:
+        return round(float(x), 6) if np.isfinite(x) else None
+
+    records = []
+    for k, s in enumerate(np.asarray(slopes, np.float64)):
+        rec = {"index": k, "slope": round(float(s), 6), "alpha": round(alpha_from_slope(float(s)), 6) if s < 1 else None}
+        if camera is not None:
+            p = refocus_plane(camera, float(s))
+            rec.update(distance_m=metres(p.focus_m), dof_near_m=metres(p.dof_near_m), dof_far_m=metres(p.dof_far_m))
+        records.append(rec)
+    return records
 
 
 __all__ = ["resolve_slopes", "slope_range", "check_slopes", "view_weights", "plane_spacing", "scene_slopes",

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.errors import LFValueError
+from lfstream.optics import PlenopticCamera
 
 REFOCUS_MODES = ("auto", "refnet", "sas", "fourier", "none")
 #: Named focal-plane sets of StreamConfig.alphas (besides explicit alphas).
@@ -65,6 +66,8 @@ class StreamConfig:
     metrics: bool = True
     sink_delay_s: float = 0.0  # an artificially slow sink (backpressure benchmarks)
     fps: float = 30.0
+    # the capturing camera, when known: each focal plane then records its refocus distance
+    camera: PlenopticCamera | None = None
 
     def validate(self) -> None:
         """Raises :class:`LFValueError` naming the first field out of its range."""

@@ -69,7 +69,7 @@ class Refocuser:
         """The current planes: index, slope and alpha (``None`` for slopes >= 1)."""
         from lfstream.refocus.planes import plane_records
 
-        return plane_records(self.slopes)
+        return plane_records(self.slopes, self.config.camera)
 
     def _refnet_applicable(self) -> bool:
         from lfstream.models.registry import manifest_entry

@@ -83,7 +83,7 @@ class Sink:
         if self._slopes is not None:
             from lfstream.refocus.planes import plane_records
 
-            planes = plane_records(self._slopes)
+            planes = plane_records(self._slopes, self.config.camera)
             try:
                 atomic_write_text(self.out / "planes.json", json.dumps({"planes": planes, "updates": self._plane_log},
                                                                         indent=1))

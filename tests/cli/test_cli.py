@@ -273,3 +273,26 @@ def test_progress_is_shown_on_a_terminal_unless_json(monkeypatch):
     monkeypatch.setattr(sys.stderr, "isatty", lambda: False)
     assert progress_callback(argparse.Namespace(progress=False, json=False)) is None
     assert progress_callback(argparse.Namespace(progress=True, json=False)) is not None
+
+
+def test_planes_record_their_refocus_distance_when_the_camera_is_given(capsys, tmp_path):
+    """The seahorse sample's camera (100 mm, 50 mm aperture = f/2, 500 microlenses, 5 px
+    each): every plane records its refocus distance and depth of field, as lfstream
+    optics computes them for the same slope."""
+    from lfstream.optics import PlenopticCamera, refocus_plane
+
+    sea = shared("seahorse5x5", "camImagesFlat")
+    if not sea.exists():
+        pytest.skip("seahorse sample not present")
+    code, _, err = run(capsys, "stream", sea, "-o", tmp_path / "x", "--focal-length", "100")
+    assert code == 2 and "go together" in err
+    code, out, _ = run(capsys, "stream", sea, "-o", tmp_path / "s", "--json", "--refocus", "sas", "--mssim-every", "0",
+                       "--focal-length", "100", "--f-number", "2", "--microlenses", "500", "--pixels-per-lens", "5")
+    assert code == 0
+    planes = json.loads(out)["planes"]
+    cam = PlenopticCamera(focal_length_mm=100, f_number=2, microlenses=500, pixels_per_lens=5)
+    for p in planes:
+        ref = refocus_plane(cam, p["slope"])
+        assert p["distance_m"] is None or p["distance_m"] == pytest.approx(ref.focus_m, rel=1e-4)
+    finite = [p["distance_m"] for p in planes if p["distance_m"] is not None]
+    assert len(finite) >= 2 and all(a > b for a, b in zip(finite, finite[1:]))  # nearer planes: shorter distances
