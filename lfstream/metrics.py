@@ -77,11 +77,8 @@ def _out(t: torch.Tensor, is_torch: bool):
     return float(arr) if arr.ndim == 0 else arr
 
 
-def _psnr_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
-    """PSNR of numpy images through OpenCV's SIMD norm (squared errors summed in float64,
-    ~20x faster than a float64 torch pass over a 7x7x375x540 light field)."""
-    import cv2
-
+def _numpy_pair(x: np.ndarray, y: np.ndarray, data_range: float | None) -> float:
+    """Checks two numpy images for a metric; returns their data range (255 for uint8, 1 for float)."""
     if x.shape != y.shape:
         raise LFShapeError(f"metrics: shapes differ: {x.shape} vs {y.shape}")
     if x.ndim < 3:
@@ -92,6 +89,15 @@ def _psnr_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
     rng = float(data_range) if data_range is not None else (255.0 if x.dtype == np.uint8 else 1.0)
     if not math.isfinite(rng) or rng <= 0:
         raise LFValueError(f"data_range: must be positive and finite, got {data_range!r}")
+    return rng
+
+
+def _psnr_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
+    """PSNR of numpy images through OpenCV's SIMD norm (squared errors summed in float64,
+    ~20x faster than a float64 torch pass over a 7x7x375x540 light field)."""
+    import cv2
+
+    rng = _numpy_pair(x, y, data_range)
     h, w, c = x.shape[-3:]
     if x.dtype != y.dtype or x.dtype not in (np.uint8, np.float32, np.float64):
         x, y = x.astype(np.float64), y.astype(np.float64)
@@ -187,16 +193,7 @@ def _ssim_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
     float64 convolution on CPU); the valid region does not depend on the border mode."""
     import cv2
 
-    if x.shape != y.shape:
-        raise LFShapeError(f"metrics: shapes differ, {x.shape} vs {y.shape}")
-    if x.ndim < 3:
-        raise LFShapeError(f"metrics: expected (..., H, W, C), got shape {x.shape}")
-    for a in (x, y):
-        if not (a.dtype == np.uint8 or np.issubdtype(a.dtype, np.floating)):
-            raise LFValueError(f"metrics: expected uint8 or float data, got {a.dtype}")
-    rng = float(data_range) if data_range is not None else (255.0 if x.dtype == np.uint8 else 1.0)
-    if not math.isfinite(rng) or rng <= 0:
-        raise LFValueError(f"data_range: must be positive and finite, got {data_range!r}")
+    rng = _numpy_pair(x, y, data_range)
     h, w, c = x.shape[-3:]
     if h < _SSIM_WIN or w < _SSIM_WIN:
         raise LFShapeError(f"ssim: images must be at least {_SSIM_WIN}x{_SSIM_WIN}, got {h}x{w}")

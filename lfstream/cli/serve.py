@@ -5,15 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from lfstream.cli import _pipeline
 from lfstream.cli._common import float_in, int_in
-from lfstream.cli._pipeline import (
-    add_pipeline_options,
-    check_output_folder,
-    interrupted_summary,
-    pipeline_config,
-    progress_callback,
-    report,
-)
 
 HELP = "receive a stream over TCP, decode, refocus and write the outputs"
 
@@ -24,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keep-open", action="store_true", help="serve one sender after another until Ctrl-C")
     p.add_argument("--timeout", type=float_in(0.1, 86400), default=300.0,
                    help="seconds to wait for a sender or for data")
-    add_pipeline_options(p)
+    _pipeline.add_pipeline_options(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -32,8 +25,8 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.stream import Pipeline
     from lfstream.stream.transport import TcpReceiver
 
-    check_output_folder(args.output)
-    cfg = pipeline_config(args)
+    _pipeline.check_output_folder(args.output)
+    cfg = _pipeline.pipeline_config(args)
     while True:
         # each sender's outputs in a folder of their own, never one that holds results
         out = prepare_output_dir(fresh_dir(args.output or "lfstream-serve"))
@@ -41,9 +34,9 @@ def run(args: argparse.Namespace) -> int:
         if not args.json:
             print(f"listening on {receiver.address[0]}:{receiver.address[1]} -> {out}", file=sys.stderr)
         try:
-            summary = Pipeline(None, cfg, out, receiver=receiver, progress=progress_callback(args)).run()
+            summary = Pipeline(None, cfg, out, receiver=receiver, progress=_pipeline.progress_callback(args)).run()
         except KeyboardInterrupt:
-            summary = interrupted_summary()
-        report(args, summary, out)
+            summary = _pipeline.interrupted_summary()
+        _pipeline.report(args, summary, out)
         if not args.keep_open or summary["interrupted"]:
             return 130 if summary["interrupted"] else 0

@@ -5,15 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lfstream.cli import _pipeline
 from lfstream.cli._common import add_read_options, int_in, read_options
-from lfstream.cli._pipeline import (
-    add_pipeline_options,
-    check_output_folder,
-    interrupted_summary,
-    pipeline_config,
-    progress_callback,
-    report,
-)
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.stream.config import TRANSPORTS
 
@@ -27,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50)
     p.add_argument("--no-depth-hint", action="store_true", help="send only the JPEG centre view")
     p.add_argument("--frames", type=int_in((1, 1 << 20)), default=12, help="frames of the built-in clip")
-    add_pipeline_options(p)
+    _pipeline.add_pipeline_options(p)
     add_read_options(p)
 
 
@@ -36,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.stream import Pipeline, Source, file_source, synthetic_source
     from lfstream.stream.transport import TcpSender, parse_address
 
-    check_output_folder(args.output)
+    _pipeline.check_output_folder(args.output)
     sender, out = None, None
     if args.to:
         sender = TcpSender(*parse_address(args.to))
@@ -48,14 +41,14 @@ def run(args: argparse.Namespace) -> int:
             source = Source(synthetic_source(frames=args.frames), None, None, args.frames)
         else:
             source = file_source(args.input, read_options(args))
-        cfg = pipeline_config(args, quality=args.quality, depth_hint=not args.no_depth_hint, transport=args.transport,
+        cfg = _pipeline.pipeline_config(args, quality=args.quality, depth_hint=not args.no_depth_hint, transport=args.transport,
                               fps=source.fps or 30.0)
-        pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=progress_callback(args),
+        pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
                         present=source.present)
         summary = pipe.run()
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)
-        summary = interrupted_summary()
-    report(args, summary, out)
+        summary = _pipeline.interrupted_summary()
+    _pipeline.report(args, summary, out)
     return 130 if summary["interrupted"] else 0
