@@ -35,6 +35,10 @@ def __getattr__(name: str):
         from lfstream import codec
 
         return getattr(codec, name)
+    if name == "batch":
+        from lfstream.cluster import batch
+
+        return batch
     raise AttributeError(f"module 'lfstream' has no attribute {name!r}")
 
 
@@ -49,4 +53,5 @@ __all__ = [
     "write_pfm",
     "encode",
     "decode",
+    "batch",
 ]

@@ -27,6 +27,7 @@ COMMANDS = {
     "encode": "lfstream.cli.encode",
     "decode": "lfstream.cli.decode",
     "baseline": "lfstream.cli.baseline",
+    "batch": "lfstream.cli.batch",
     "refocus": "lfstream.cli.refocus",
     "synth": "lfstream.cli.synth",
     "optics": "lfstream.cli.optics",

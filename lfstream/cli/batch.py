@@ -1,0 +1,63 @@
+"""``lfstream batch``: encode or decode a collection of LF videos, here or on Ray."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from lfstream.cli._common import add_read_options, emit, int_in, read_options
+from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
+from lfstream.codec.jpeg import QUALITY_RANGE
+
+HELP = "encode or decode a collection of LF videos, in this process or on a Ray cluster"
+#: Engines and modes of lfstream.cluster.run (kept here so --help imports nothing heavy).
+ENGINES = ("local", "ray")
+MODES = ("encode", "decode")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("inputs", type=Path, nargs="+", help="LF videos / light fields (encode) or .lfs streams (decode)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (files in it are never overwritten "
+                   "without --overwrite)")
+    p.add_argument("--mode", choices=MODES, default="encode")
+    p.add_argument("--engine", choices=ENGINES, default="local",
+                   help="local: this process; ray: Ray tasks (pip install 'lfstream[ray]')")
+    p.add_argument("--address", help="a running Ray cluster (default: a local one for this command)")
+    p.add_argument("--workers", type=int_in((1, 4096)), help="CPUs of the local Ray cluster (default: all)")
+    p.add_argument("--group", type=int_in((1, 1 << 20)), default=8, help="frames per job (default 8)")
+    p.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="encode: JPEG quality of the centre view")
+    p.add_argument("--no-depth-hint", action="store_true", help="encode: send only the JPEG centre view")
+    p.add_argument("--depth", choices=DEPTH_MODES, default="auto", help="decode: disparity source")
+    p.add_argument("--hance", choices=HANCE_MODES, default="auto", help="decode: JPEG-Hance")
+    p.add_argument("--device", default="cpu", help="decode: where the networks run")
+    p.add_argument("--format", default=".npy", help="decode: output extension (.npy, .npz, .mkv, .mp4 or '' for "
+                   "folders of views)")
+    p.add_argument("--overwrite", action="store_true")
+    add_read_options(p)
+    p.add_argument("--json", action="store_true")
+
+
+def _text(r: dict) -> str:
+    lines = [f"{r['mode']} on {r['engine']} ({r['workers']} worker(s)): {r['frames']} frame(s), {r['bytes']} bytes, "
+             f"{r['wall_s']} s, {r['fps']} frames/s"]
+    for f in r["files"]:
+        lines.append(f"  {f['status']:6s} {f['input']} -> {f['output']}" + (f"  ({f['error']})" if f["error"] else ""))
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from lfstream.cluster import DecodeOptions, EncodeOptions, batch
+
+    report = batch(args.inputs, args.output, mode=args.mode, engine=args.engine, address=args.address,
+                   workers=args.workers, group_frames=args.group,
+                   encode=EncodeOptions(quality=args.quality, depth_hint=not args.no_depth_hint),
+                   decode=DecodeOptions(depth=args.depth, hance=args.hance, device=args.device),
+                   read=read_options(args), output_format=args.format, overwrite=args.overwrite)
+    emit(args, report.as_dict(), _text)
+    if not report.ok:
+        failed = [f for f in report.files if f.status != "ok"]
+        print(f"lfstream batch: error: {len(failed)} of {len(report.files)} input(s) failed: "
+              + "; ".join(f.error or f.input for f in failed), file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,114 @@
+"""The units of batch work: frame groups, and the pure functions that encode or decode one.
+
+A job is self-contained and deterministic, so it gives the same bytes in this process or
+on any worker of a cluster. Encoding: the first frame of every group is a key frame (its
+depth hint is sent whole), so groups encode independently and their packets, renumbered
+in order, make one ``.lfs`` stream. Decoding: groups start at packets whose hint is whole
+(or at streams without a hint), so each group decodes on its own exactly as a sequential
+decoder would.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lfstream.codec.bitstream import Packet, StreamHeader, pack_packet, read_header, read_packet
+from lfstream.codec.hint import KIND_FULL
+
+
+@dataclass(frozen=True)
+class EncodeOptions:
+    """What ``batch(mode="encode")`` does to every frame (as ``lfstream encode``)."""
+
+    quality: int = 50
+    depth_hint: bool = True
+
+
+@dataclass(frozen=True)
+class DecodeOptions:
+    """What ``batch(mode="decode")`` does to every packet (as ``lfstream decode``)."""
+
+    depth: str = "auto"
+    hance: str = "auto"
+    device: str = "cpu"
+
+
+@dataclass
+class GroupResult:
+    """What one job returns: packed packets (encode) or decoded frames (decode)."""
+
+    start: int
+    packets: list[bytes] = field(default_factory=list)
+    frames: np.ndarray | None = None
+    seconds: float = 0.0
+
+
+def encode_group(frames: np.ndarray, start: int, fps: float, options: EncodeOptions,
+                 present: np.ndarray | None = None) -> GroupResult:
+    """Encodes frames ``start, start + 1, ...`` with a fresh encoder (the group's first frame
+    is a key frame); returns the packets packed, in order."""
+    import time
+
+    from lfstream.codec.encoder import Encoder
+
+    t0 = time.perf_counter()
+    enc = Encoder(quality=options.quality, depth_hint=options.depth_hint)
+    packets = [pack_packet(enc.encode_frame(f, start + k, int(round((start + k) * 1e6 / fps)), present))
+               for k, f in enumerate(frames)]
+    return GroupResult(start, packets=packets, seconds=time.perf_counter() - t0)
+
+
+def decode_group(header_bytes: bytes, packets: list[bytes], start: int, options: DecodeOptions) -> GroupResult:
+    """Decodes packets that start at a self-contained one; returns ``(n, U, V, H, W, 3)``."""
+    import time
+
+    from lfstream.codec.decoder import Decoder
+
+    t0 = time.perf_counter()
+    header = read_header(io.BytesIO(header_bytes))
+    dec = Decoder(header, depth=options.depth, hance=options.hance, device=options.device)
+    parsed = [read_packet(io.BytesIO(p), header) for p in packets]
+    frames = np.stack([f.lf for f in dec.decode_batch(parsed)])
+    return GroupResult(start, frames=frames, seconds=time.perf_counter() - t0)
+
+
+def encode_groups(n_frames: int, group: int) -> list[tuple[int, int]]:
+    """``[start, stop)`` frame ranges of ``group`` frames (the last may be shorter)."""
+    return [(s, min(s + group, n_frames)) for s in range(0, n_frames, group)]
+
+
+def decode_groups(packets: list[Packet], group: int) -> list[tuple[int, int]]:
+    """Packet ranges of at least ``group`` packets (where possible), each starting at a
+    packet that decodes on its own: no hint, or a whole (key) hint."""
+    def starts_clean(p: Packet) -> bool:
+        return not p.hint or p.hint[0] == 1 or (len(p.hint) > 1 and p.hint[1] == KIND_FULL)
+
+    cuts = [0]
+    for k in range(1, len(packets)):
+        if k - cuts[-1] >= group and starts_clean(packets[k]):
+            cuts.append(k)
+    return [(a, b) for a, b in zip(cuts, cuts[1:] + [len(packets)])]
+
+
+def split_stream_bytes(data: bytes) -> tuple[StreamHeader, bytes, list[Packet], list[bytes]]:
+    """The header (parsed and as bytes) and every packet (parsed and as bytes) of a stream;
+    raises :class:`~lfstream.errors.BitstreamError` at damage."""
+    from lfstream.codec.bitstream import iter_packets
+
+    fh = io.BytesIO(data)
+    header = read_header(fh)
+    header_bytes = data[: fh.tell()]
+    packets, raw = [], []
+    pos = fh.tell()
+    for p in iter_packets(fh, header):
+        packets.append(p)
+        raw.append(data[pos: fh.tell()])
+        pos = fh.tell()
+    return header, header_bytes, packets, raw
+
+
+__all__ = ["EncodeOptions", "DecodeOptions", "GroupResult", "encode_group", "decode_group", "encode_groups",
+           "decode_groups", "split_stream_bytes"]

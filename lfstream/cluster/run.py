@@ -1,0 +1,258 @@
+"""``lfstream.batch`` (:func:`batch`): encode or decode collections of LF videos, in this process or on Ray.
+
+Every input is split into frame groups (:mod:`lfstream.cluster.jobs`), the groups of all
+inputs run as independent jobs — one after another here (``engine="local"``), or as Ray
+tasks spread over a cluster's workers (``engine="ray"``; a local cluster that starts and
+stops with the call, or a running one by ``address``) — and each input's results are
+reassembled in order and written through a temporary name. Jobs are deterministic, so
+both engines write the same bytes. A worker that dies has its jobs retried by Ray; an
+input that cannot be read or decoded fails alone, named in the report.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lfstream.cluster.jobs import (
+    DecodeOptions,
+    EncodeOptions,
+    GroupResult,
+    decode_group,
+    decode_groups,
+    encode_group,
+    encode_groups,
+    split_stream_bytes,
+)
+from lfstream.errors import LFStreamError, LFValueError
+
+ENGINES = ("local", "ray")
+MODES = ("encode", "decode")
+#: Attempts Ray gives a job whose worker died (the first run plus retries).
+RAY_MAX_RETRIES = 3
+
+
+@dataclass
+class FileResult:
+    """One input's outcome."""
+
+    input: str
+    output: str | None = None
+    status: str = "pending"  # "ok" or "failed"
+    frames: int = 0
+    bytes: int = 0
+    error: str | None = None
+
+
+@dataclass
+class BatchReport:
+    """What a batch did (``lfstream batch --json`` prints :meth:`as_dict`)."""
+
+    engine: str
+    workers: int
+    mode: str
+    files: list[FileResult] = field(default_factory=list)
+    wall_s: float = 0.0
+
+    @property
+    def frames(self) -> int:
+        return sum(f.frames for f in self.files if f.status == "ok")
+
+    @property
+    def bytes(self) -> int:
+        return sum(f.bytes for f in self.files if f.status == "ok")
+
+    @property
+    def ok(self) -> bool:
+        return all(f.status == "ok" for f in self.files)
+
+    def as_dict(self) -> dict:
+        return {"engine": self.engine, "workers": self.workers, "mode": self.mode, "frames": self.frames,
+                "bytes": self.bytes, "wall_s": round(self.wall_s, 3),
+                "fps": round(self.frames / self.wall_s, 3) if self.wall_s > 0 else None,
+                "files": [asdict(f) for f in self.files]}
+
+
+@dataclass
+class _Job:
+    file: int
+    fn: Callable[..., GroupResult]
+    args: tuple
+
+
+def _output_name(path: Path, suffix: str, taken: set[str]) -> str:
+    stem = path.name if path.is_dir() else path.stem
+    name, k = f"{stem}{suffix}", 1
+    while name in taken:
+        k += 1
+        name = f"{stem}-{k}{suffix}"
+    taken.add(name)
+    return name
+
+
+def _run_local(jobs: list[_Job]) -> list[GroupResult | BaseException]:
+    out: list[GroupResult | BaseException] = []
+    for job in jobs:
+        try:
+            out.append(job.fn(*job.args))
+        except Exception as exc:  # noqa: BLE001 - the input fails alone, with its error in the report
+            out.append(exc)
+    return out
+
+
+def _remote_call(fn: Callable[..., GroupResult], args: tuple, fail_once: str | None) -> GroupResult:
+    if fail_once is not None and not os.path.exists(fail_once):
+        # fault injection for tests: the first attempt of this job kills its worker process
+        open(fail_once, "w").close()
+        os._exit(1)
+    return fn(*args)
+
+
+def _ray():
+    try:
+        import ray
+    except ImportError:
+        raise LFValueError("engine='ray' needs Ray: pip install 'lfstream[ray]' (or pip install ray)") from None
+    return ray
+
+
+def _run_ray(jobs: list[_Job], address: str | None, workers: int | None,
+             fail_once: Path | None) -> tuple[list[GroupResult | BaseException], int]:
+    ray = _ray()
+    started = not ray.is_initialized()
+    if started:
+        if address:
+            ray.init(address=address, log_to_driver=False, configure_logging=False)
+        else:
+            # a local cluster for this call only, on loopback
+            ray.init(num_cpus=workers or os.cpu_count() or 1, include_dashboard=False, log_to_driver=False,
+                     configure_logging=False, _node_ip_address="127.0.0.1")
+    try:
+        n_workers = int(ray.cluster_resources().get("CPU", 1))
+        remote = ray.remote(max_retries=RAY_MAX_RETRIES, retry_exceptions=False)(_remote_call)
+        refs = [remote.remote(job.fn, job.args, str(fail_once) if fail_once and k == 0 else None)
+                for k, job in enumerate(jobs)]
+        out: list[GroupResult | BaseException] = []
+        for ref in refs:
+            try:
+                out.append(ray.get(ref))
+            except Exception as exc:  # noqa: BLE001 - RayTaskError wraps the job's own error
+                out.append(getattr(exc, "cause", None) or exc)
+        return out, n_workers
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mode: str = "encode",
+          engine: str = "local", address: str | None = None, workers: int | None = None, group_frames: int = 8,
+          encode: EncodeOptions = EncodeOptions(), decode: DecodeOptions = DecodeOptions(), read=None,
+          output_format: str = ".npy", overwrite: bool = False, _fail_once: Path | None = None) -> BatchReport:
+    """Encodes LF videos to ``OUTPUT/<name>.lfs`` (``mode="encode"``) or decodes ``.lfs``
+    streams to ``OUTPUT/<name><output_format>`` (``mode="decode"``).
+
+    Args:
+        inputs: LF videos or light fields in any readable format (encode), ``.lfs`` (decode).
+        output: the output folder (created; existing files are kept unless ``overwrite``).
+        engine: ``"local"`` (this process) or ``"ray"``.
+        address: a running Ray cluster (``ray start --head`` prints it); default: a local
+            cluster started and stopped by this call.
+        workers: CPUs of the local Ray cluster (default: all).
+        group_frames: frames per job; a long video spreads over workers by groups.
+        encode, decode: the codec options; read: :class:`~lfstream.io.ReadOptions`.
+
+    Returns:
+        :class:`BatchReport`; an input that failed has ``status="failed"`` and its error.
+    """
+    from lfstream.io import ReadOptions, load_lf, write_lf
+    from lfstream.io._fs import atomic_open, prepare_output_dir
+
+    if mode not in MODES or engine not in ENGINES:
+        raise LFValueError(f"mode: one of {', '.join(MODES)}; engine: one of {', '.join(ENGINES)}; "
+                           f"got {mode!r}, {engine!r}")
+    if not isinstance(group_frames, int) or group_frames < 1:
+        raise LFValueError(f"group_frames: a positive integer, got {group_frames!r}")
+    if engine == "ray":
+        _ray()  # fail early with the install hint
+    t0 = time.perf_counter()
+    out_dir = prepare_output_dir(output, overwrite=True)
+    read = read or ReadOptions()
+    report = BatchReport(engine=engine, workers=1, mode=mode)
+    jobs: list[_Job] = []
+    plans: dict[int, dict] = {}
+    taken: set[str] = set()
+    for i, src in enumerate(inputs):
+        path = Path(src)
+        res = FileResult(input=str(path))
+        report.files.append(res)
+        try:
+            name = _output_name(path, ".lfs" if mode == "encode" else output_format, taken)
+            target = out_dir / name
+            if target.exists() and not overwrite:
+                raise LFValueError(f"{target}: already exists (pass overwrite=True / --overwrite to replace it)")
+            res.output = str(target)
+            if mode == "encode":
+                loaded = load_lf(path, read)
+                lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
+                fps = loaded.fps or 30.0
+                plans[i] = {"target": target, "views": tuple(lf.shape[1:3]), "size": tuple(lf.shape[3:5]), "fps": fps}
+                for a, b in encode_groups(len(lf), group_frames):
+                    jobs.append(_Job(i, encode_group, (np.ascontiguousarray(lf[a:b]), a, fps, encode, loaded.present)))
+            else:
+                try:
+                    data = path.read_bytes()
+                except OSError as exc:
+                    raise LFStreamError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+                header, header_bytes, packets, raw = split_stream_bytes(data)
+                if not packets:
+                    raise LFValueError(f"{path}: stream holds no frames")
+                plans[i] = {"target": target, "fps": header.fps}
+                for a, b in decode_groups(packets, group_frames):
+                    jobs.append(_Job(i, decode_group, (header_bytes, raw[a:b], a, decode)))
+        except LFStreamError as exc:
+            res.status, res.error = "failed", f"{path}: {exc}" if str(path) not in str(exc) else str(exc)
+    if engine == "ray" and jobs:
+        results, report.workers = _run_ray(jobs, address, workers, _fail_once)
+    else:
+        results = _run_local(jobs)
+    by_file: dict[int, list[GroupResult | BaseException]] = {}
+    for job, r in zip(jobs, results):
+        by_file.setdefault(job.file, []).append(r)
+    for i, parts in by_file.items():
+        res, plan = report.files[i], plans[i]
+        failed = next((p for p in parts if isinstance(p, BaseException)), None)
+        if failed is not None:
+            res.status, res.error = "failed", f"{res.input}: {failed}"
+            continue
+        try:
+            if mode == "encode":
+                from lfstream.codec.bitstream import pack_header
+                from lfstream.codec.encoder import Encoder
+
+                header = Encoder(quality=encode.quality, depth_hint=encode.depth_hint).header(
+                    plan["views"], plan["size"], plan["fps"])
+                with atomic_open(plan["target"]) as fh:
+                    fh.write(pack_header(header))
+                    for part in parts:
+                        for p in part.packets:
+                            fh.write(p)
+                res.frames = sum(len(p.packets) for p in parts)
+                res.bytes = plan["target"].stat().st_size
+            else:
+                frames = np.concatenate([p.frames for p in parts])
+                write_lf(plan["target"], frames, fps=plan["fps"], overwrite=overwrite)
+                res.frames = len(frames)
+                res.bytes = plan["target"].stat().st_size if plan["target"].is_file() else int(frames.nbytes)
+            res.status = "ok"
+        except LFStreamError as exc:
+            res.status, res.error = "failed", f"{res.input}: {exc}"
+    report.wall_s = time.perf_counter() - t0
+    return report
+
+
+__all__ = ["ENGINES", "MODES", "RAY_MAX_RETRIES", "FileResult", "BatchReport", "batch"]

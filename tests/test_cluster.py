@@ -1,0 +1,97 @@
+"""lfstream.batch: the local and Ray engines give the same bytes, a killed worker loses no
+frames, a bad input fails alone, and the .lfs it writes decodes like a sequential encode."""
+
+import importlib.util
+import json
+
+import numpy as np
+import pytest
+
+import lfstream
+from lfstream.cli import main
+from lfstream.cluster import EncodeOptions, batch
+from lfstream.synth import synth_clip
+
+HAS_RAY = importlib.util.find_spec("ray") is not None
+needs_ray = pytest.mark.skipif(not HAS_RAY, reason="Ray is not installed (pip install 'lfstream[ray]')")
+
+
+@pytest.fixture(scope="module")
+def videos(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("videos")
+    paths = []
+    for k, frames in enumerate((7, 3)):
+        p = folder / f"clip{k}.npy"
+        np.save(p, synth_clip(frames, 5, (40, 48), seed=k, motion=0.5).lf)
+        paths.append(p)
+    bad = folder / "broken.npy"
+    bad.write_bytes(b"\x93NUMPY garbage")
+    return paths, bad
+
+
+def test_local_batch_encodes_every_input_and_the_streams_decode(videos, tmp_path):
+    paths, _ = videos
+    report = batch(paths, tmp_path / "out", group_frames=3)
+    assert report.ok and report.frames == 10 and [f.frames for f in report.files] == [7, 3]
+    for p, f in zip(paths, report.files):
+        data = open(f.output, "rb").read()
+        assert f.bytes == len(data)
+        assert lfstream.decode(data).shape == np.load(p).shape
+    # one group per input: exactly the bytes of a sequential lfstream.encode
+    whole = batch(paths, tmp_path / "whole", group_frames=100)
+    for p, f in zip(paths, whole.files):
+        assert open(f.output, "rb").read() == lfstream.encode(np.load(p))
+
+
+def test_a_broken_input_fails_alone_and_nothing_is_overwritten(videos, tmp_path, capsys):
+    paths, bad = videos
+    out = tmp_path / "out"
+    code = main(["batch", str(paths[1]), str(bad), "-o", str(out), "--json"])
+    result = json.loads(capsys.readouterr().out)
+    assert code == 2
+    status = {f["input"]: f for f in result["files"]}
+    assert status[str(paths[1])]["status"] == "ok" and status[str(bad)]["status"] == "failed"
+    assert "broken.npy" in status[str(bad)]["error"]
+    assert sorted(p.name for p in out.iterdir()) == ["clip1.lfs"]  # no partial file for the broken one
+    again = batch([paths[1]], out)
+    assert not again.ok and "already exists" in again.files[0].error
+
+
+def test_decode_mode_reassembles_frames_in_order(videos, tmp_path):
+    paths, _ = videos
+    enc = batch([paths[0]], tmp_path / "lfs", group_frames=2, encode=EncodeOptions(quality=60))
+    lfs = enc.files[0].output
+    dec = batch([lfs], tmp_path / "dec", mode="decode", group_frames=2)
+    assert dec.ok and dec.files[0].frames == 7
+    assert np.array_equal(np.load(dec.files[0].output), lfstream.decode(open(lfs, "rb").read()))
+
+
+@needs_ray
+def test_ray_engine_gives_byte_identical_outputs_and_survives_a_killed_worker(videos, tmp_path):
+    paths, _ = videos
+    local = batch(paths, tmp_path / "local", group_frames=3)
+    marker = tmp_path / "killed-once"
+    ray_report = batch(paths, tmp_path / "ray", engine="ray", workers=2, group_frames=3, _fail_once=marker)
+    assert marker.exists()  # the first job's worker was killed, and Ray ran the job again
+    assert ray_report.ok and ray_report.engine == "ray" and ray_report.workers == 2
+    assert ray_report.frames == local.frames == 10
+    for a, b in zip(local.files, ray_report.files):
+        assert open(a.output, "rb").read() == open(b.output, "rb").read()
+    dec_local = batch([local.files[0].output], tmp_path / "dl", mode="decode", group_frames=2)
+    dec_ray = batch([local.files[0].output], tmp_path / "dr", mode="decode", engine="ray", workers=2, group_frames=2)
+    assert np.array_equal(np.load(dec_local.files[0].output), np.load(dec_ray.files[0].output))
+
+
+def test_without_ray_the_engine_says_how_to_install_it(monkeypatch, tmp_path):
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_ray(name, *args, **kwargs):
+        if name == "ray":
+            raise ImportError("no ray here")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_ray)
+    with pytest.raises(lfstream.LFValueError, match=r"pip install 'lfstream\[ray\]'"):
+        batch([tmp_path / "x.npy"], tmp_path / "out", engine="ray")
