@@ -33,6 +33,7 @@ COMMANDS = {
     "optics": "lfstream.cli.optics",
     "models": "lfstream.cli.models",
     "demo": "lfstream.cli.demo",
+    "view": "lfstream.cli.view",
 }
 
 

@@ -40,6 +40,7 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mssim-every", type=int_in((0, 1 << 30)), default=10,
                    help="MSSIM on every N-th frame (0: never; MPSNR on all)")
     p.add_argument("--queue-size", type=int_in(QUEUE_RANGE), default=4)
+    p.add_argument("--no-viewer", action="store_true", help="do not write index.html (click-to-focus page)")
     p.add_argument("--progress", action="store_true", help="a status line on stderr (default when it is a terminal)")
     p.add_argument("--json", action="store_true")
 
@@ -110,6 +111,23 @@ def _text(summary: dict, out: Path | None) -> str:
     return "\n".join(lines)
 
 
+def write_page(args: argparse.Namespace, summary: dict, out: Path | None) -> Path | None:
+    """The click-to-focus page (``index.html``) for the run's planes, unless ``--no-viewer``
+    or nothing was rendered; its path goes into the summary as ``viewer``."""
+    if out is None or args.no_viewer or not summary.get("frames") or not summary.get("planes"):
+        return None
+    from lfstream.errors import LFStreamError
+    from lfstream.viewer import write_viewer
+
+    try:
+        path = write_viewer(out, fps=summary.get("fps"))
+    except LFStreamError as exc:  # e.g. --save without mp4/png: nothing to show
+        summary["viewer"], summary["viewer_note"] = None, str(exc)
+        return None
+    summary["viewer"] = str(path)
+    return path
+
+
 def report(args: argparse.Namespace, summary: dict, out: Path | None) -> None:
     """Writes ``summary.json`` into ``out`` and prints the summary (JSON or text)."""
     from lfstream.stream.report import write_summary
@@ -122,4 +140,4 @@ def report(args: argparse.Namespace, summary: dict, out: Path | None) -> None:
 
 
 __all__ = ["add_pipeline_options", "check_output_folder", "interrupted_summary", "pipeline_config", "progress_callback",
-           "report"]
+           "report", "write_page"]

@@ -30,14 +30,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--aperture-shape", choices=("circle", "square", "gaussian"), default="circle")
     p.add_argument("--fps", type=float_in(1e-3, 1000), default=8.0, help="frame rate of the focal sweep")
     p.add_argument("--no-sweep", action="store_true", help="skip the MP4/GIF focal sweep")
+    p.add_argument("--no-viewer", action="store_true", help="do not write index.html (click-to-focus page)")
     add_read_options(p)
     p.add_argument("--json", action="store_true")
 
 
 def run(args: argparse.Namespace) -> int:
+    import json
+
     from lfstream.io import write_image, write_video
-    from lfstream.optics import alpha_from_slope
-    from lfstream.refocus import focal_stack, resolve_slopes, slope_range
+    from lfstream.io._fs import atomic_write_text
+    from lfstream.refocus import focal_stack, plane_records, resolve_slopes, slope_range
 
     given = [x is not None for x in (args.alphas, args.slopes, args.slope_range)]
     if sum(given) > 1:
@@ -60,10 +63,7 @@ def run(args: argparse.Namespace) -> int:
     out = prepare_output_dir(args.output)
     video = stack if stack.ndim == 5 else stack[None]
     files: list[str] = []
-    planes = []
-    for k, s in enumerate(slopes):
-        alpha = alpha_from_slope(s) if s < 1 else None
-        planes.append({"index": k, "slope": float(s), "alpha": alpha})
+    planes = plane_records(slopes)
     for t, frame_stack in enumerate(video):
         folder = out if len(video) == 1 else out / f"frame_{t:06d}"
         folder.mkdir(exist_ok=True)
@@ -81,7 +81,20 @@ def run(args: argparse.Namespace) -> int:
                 path = out / f"plane_{k:02d}.mp4"
                 write_video(path, list(video[:, k]), fps=loaded.fps or 30.0, lossless=False)
                 files.append(str(path))
+    atomic_write_text(out / "planes.json", json.dumps({"planes": planes, "updates": []}, indent=1))
+    viewer = None
+    if not args.no_viewer:
+        # click to focus needs the scene's disparity: the codec's hint estimator, per frame
+        from lfstream.codec.hint import estimate_disparity
+        from lfstream.viewer import disparity_record, write_disparity_json, write_viewer
+
+        lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
+        write_disparity_json(out, [disparity_record(t, estimate_disparity(f, present=loaded.present))
+                                   for t, f in enumerate(lf)])
+        viewer = write_viewer(out, fps=args.fps if len(video) == 1 else (loaded.fps or 30.0))
     summary = {"input": str(args.input), "method": args.method, "frames": len(video), "planes": planes,
-               "render_s": render_s, "output": str(out), "files": len(files)}
-    emit(args, summary, f"{len(slopes)} planes x {len(video)} frame(s) by {args.method} in {render_s:.3f} s -> {out}")
+               "render_s": render_s, "output": str(out), "files": len(files),
+               "viewer": str(viewer) if viewer is not None else None}
+    emit(args, summary, f"{len(slopes)} planes x {len(video)} frame(s) by {args.method} in {render_s:.3f} s -> {out}"
+         + (f"\nopen {viewer.resolve().as_uri()} to click-to-focus" if viewer is not None else ""))
     return 0

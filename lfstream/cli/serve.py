@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
             summary = Pipeline(None, cfg, out, receiver=receiver, progress=_pipeline.progress_callback(args)).run()
         except KeyboardInterrupt:
             summary = _pipeline.interrupted_summary()
+        _pipeline.write_page(args, summary, out)
         _pipeline.report(args, summary, out)
         if not args.keep_open or summary["interrupted"]:
             return 130 if summary["interrupted"] else 0

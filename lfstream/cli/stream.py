@@ -50,5 +50,8 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)
         summary = _pipeline.interrupted_summary()
+    viewer = _pipeline.write_page(args, summary, out)
     _pipeline.report(args, summary, out)
+    if viewer is not None and not args.json:
+        print(f"open {viewer.resolve().as_uri()} to click-to-focus the result")
     return 130 if summary["interrupted"] else 0

@@ -10,7 +10,7 @@ separable torch on GPU), :mod:`~lfstream.refocus.fourier`, :mod:`~lfstream.refoc
 
 from lfstream.optics import alpha_from_slope
 from lfstream.refocus.fourier import fourier_slice
-from lfstream.refocus.planes import plane_spacing, resolve_slopes, scene_slopes, slope_range
+from lfstream.refocus.planes import plane_records, plane_spacing, resolve_slopes, scene_slopes, slope_range
 from lfstream.refocus.shift_sum import shift_and_sum
 from lfstream.refocus.stack import METHODS, FocalStack, all_in_focus, focal_stack, refnet_stack
 
@@ -19,6 +19,7 @@ __all__ = [
     "resolve_slopes",
     "slope_range",
     "plane_spacing",
+    "plane_records",
     "scene_slopes",
     "shift_and_sum",
     "fourier_slice",

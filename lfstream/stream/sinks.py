@@ -32,6 +32,7 @@ class Sink:
         self._lf_writer = None
         self._plane_log: list[dict] = []  # frame and slopes, whenever the planes changed
         self._slopes = None  # the latest planes
+        self._disparity: list[dict] = []  # per frame, low resolution, for the viewer's click to focus
 
     def _note_planes(self, f: StackFrame) -> None:
         slopes = [round(float(s), 6) for s in f.slopes] if f.slopes is not None else []
@@ -50,7 +51,10 @@ class Sink:
     def write(self, f: StackFrame) -> None:
         cfg = self.config
         if f.stack is not None:
+            from lfstream.viewer import disparity_record
+
             self._note_planes(f)
+            self._disparity.append(disparity_record(f.seq, f.decoded.disparity))
             if "mp4" in cfg.save or "mp4-lossless" in cfg.save:
                 if not self._plane_writers:
                     lossless = "mp4-lossless" in cfg.save
@@ -88,6 +92,9 @@ class Sink:
                 atomic_write_text(self.out / "planes.json", json.dumps({"planes": planes, "updates": self._plane_log},
                                                                         indent=1))
                 self.files.append(str(self.out / "planes.json"))
+                from lfstream.viewer import write_disparity_json
+
+                self.files.append(str(write_disparity_json(self.out, self._disparity)))
             except LFStreamError as exc:
                 errors.append(str(exc))
         for w in [*self._plane_writers, self._sweep, self._lf_writer]:

@@ -87,7 +87,10 @@ def test_refocus_single_frame_writes_sweeps(capsys, tmp_path, rng):
                      "--method", "fourier")
     assert code == 0
     names = sorted(p.name for p in (tmp_path / "o").iterdir())
-    assert names == [f"plane_{k:02d}.png" for k in range(5)] + ["sweep.gif", "sweep.mp4"]
+    assert names == ["disparity.json", "index.html"] + [f"plane_{k:02d}.png" for k in range(5)] + \
+        ["planes.json", "sweep.gif", "sweep.mp4", "viewer"]  # the planes, sweeps and the click-to-focus page
+    assert [p["slope"] for p in json.loads((tmp_path / "o" / "planes.json").read_text())["planes"]] == \
+        pytest.approx([-1, -0.5, 0, 0.5, 1])
     from lfstream.io import iter_video_frames
 
     assert len(list(iter_video_frames(tmp_path / "o" / "sweep.mp4"))) == 5
