@@ -15,7 +15,10 @@ HELP = "encode a light field or LF video to an .lfs stream (JPEG centre view)"
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path)
     p.add_argument("-o", "--output", type=Path, required=True, help="the .lfs file (never overwritten without --overwrite)")
-    p.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="JPEG quality of the centre view (default 50)")
+    rate = p.add_mutually_exclusive_group()
+    rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="JPEG quality of the centre view (default 50)")
+    rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target size in bits per pixel: rate control picks the "
+                      "JPEG quality and whether to send the hint (best first-frame MPSNR within 15 %%)")
     hint = p.add_mutually_exclusive_group()
     hint.add_argument("--depth-hint", dest="depth_hint", action="store_true", default=True,
                       help="send the encoder's disparity estimate (the default)")
@@ -35,12 +38,22 @@ def run(args: argparse.Namespace) -> int:
     check_new_file(args.output, args.overwrite)
     loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
     frames = frames_of(loaded.lf)
-    enc = Encoder(quality=args.quality, depth_hint=args.depth_hint)
+    fps = args.fps or loaded.fps or 30.0
+    quality, depth_hint, rate = args.quality, args.depth_hint, None
+    if args.bpp is not None:
+        from lfstream.codec.rate import choose_configuration
+
+        rate = choose_configuration(frames, args.bpp, fps, loaded.present)
+        quality, depth_hint = rate.quality, rate.depth_hint
+    enc = Encoder(quality=quality, depth_hint=depth_hint)
     stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), enc,
-                        fps=args.fps or loaded.fps or 30.0, present=loaded.present)
+                        fps=fps, present=loaded.present)
     result = dataclasses.asdict(stats)
     result.update({"output": str(args.output), "bpp": bpp(stats.bytes, frames.shape),
-                   "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": args.quality})
+                   "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": quality, "depth_hint": depth_hint})
+    if rate is not None:
+        result["rate_control"] = {"target_bpp": args.bpp, "candidates": list(rate.candidates)}
     emit(args, result, lambda r: f"{r['frames']} frame(s) -> {args.output}: {r['bytes']} bytes, {r['bpp']:.5f} bpp"
-         + (f" (hint {r['hint_bpp']:.5f} bpp)" if args.depth_hint else "") + f", encoded in {r['encode_s']:.3f} s")
+         + (f" (hint {r['hint_bpp']:.5f} bpp)" if depth_hint else "") + f", JPEG q{quality}"
+         + f", encoded in {r['encode_s']:.3f} s")
     return 0

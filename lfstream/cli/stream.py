@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from lfstream.cli import _pipeline
-from lfstream.cli._common import add_read_options, int_in, read_options
+from lfstream.cli._common import add_read_options, float_in, int_in, read_options
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.stream.config import TRANSPORTS
 
@@ -17,7 +17,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path, nargs="?", help="LF video / light field (default: built-in synthetic clip)")
     p.add_argument("--transport", choices=TRANSPORTS, default="inproc")
     p.add_argument("--to", help="HOST:PORT of an `lfstream serve`: send there instead of decoding here")
-    p.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50)
+    rate = p.add_mutually_exclusive_group()
+    rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="JPEG quality of the centre view")
+    rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target bits per pixel: rate control on the first frame")
     p.add_argument("--no-depth-hint", action="store_true", help="send only the JPEG centre view")
     p.add_argument("--frames", type=int_in((1, 1 << 20)), default=12, help="frames of the built-in clip")
     _pipeline.add_pipeline_options(p)
@@ -41,8 +43,8 @@ def run(args: argparse.Namespace) -> int:
             source = Source(synthetic_source(frames=args.frames), None, None, args.frames)
         else:
             source = file_source(args.input, read_options(args))
-        cfg = _pipeline.pipeline_config(args, quality=args.quality, depth_hint=not args.no_depth_hint, transport=args.transport,
-                              fps=source.fps or 30.0)
+        cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp, depth_hint=not args.no_depth_hint,
+                                        transport=args.transport, fps=source.fps or 30.0)
         pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
                         present=source.present)

@@ -119,11 +119,14 @@ def encode(
     hint_options: HintOptions | None = None,
     gain_grid: int = 4,
     present: np.ndarray | None = None,
+    bpp: float | None = None,
 ) -> bytes:
     """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
 
     ``present``: the ``(U, V)`` mask of views that exist, for light fields read with missing
-    views (the centre view must exist); the decoder reconstructs all views.
+    views (the centre view must exist); the decoder reconstructs all views. ``bpp``: a
+    target size in bits per pixel instead of ``quality`` and ``depth_hint``: rate control
+    (:mod:`lfstream.codec.rate`) picks the JPEG quality and whether to send the hint.
 
     Raises:
         LFStreamError: bad shape, dtype, non-finite values or parameters.
@@ -134,6 +137,11 @@ def encode(
         if isinstance(exc, LFStreamError):
             raise
         raise LFValueError(f"lf: not an array ({exc})") from exc
+    if bpp is not None:
+        from lfstream.codec.rate import choose_configuration
+
+        choice = choose_configuration(frames, bpp, fps, present, hint_options, gain_grid)
+        quality, depth_hint = choice.quality, choice.depth_hint
     enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid)
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))

@@ -46,6 +46,8 @@ class StreamConfig:
 
     quality: int = 50
     depth_hint: bool = True
+    # a target size in bits per pixel: rate control picks quality and hint on the first frame
+    bpp: float | None = None
     depth: str = "auto"
     hance: str = "auto"
     refocus: str = "auto"
@@ -72,6 +74,8 @@ class StreamConfig:
     def validate(self) -> None:
         """Raises :class:`LFValueError` naming the first field out of its range."""
         check_range("quality", self.quality, QUALITY_RANGE)
+        if self.bpp is not None:
+            check_range("bpp", self.bpp, (1e-5, 24.0), integer=False)
         if isinstance(self.alphas, str):
             check_choice("alphas", self.alphas, FOCUS_MODES)
         else:

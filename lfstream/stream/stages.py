@@ -196,6 +196,12 @@ class EncoderStage(ConsumerStage):
 
     def work(self, item: SourceFrame) -> Packet:
         lf = item.lf
+        if not self.started and self.config.bpp is not None:
+            # rate control on the first frame: the quality and hint the whole stream uses
+            from lfstream.codec.rate import choose_configuration
+
+            choice = choose_configuration(lf[None], self.config.bpp, self.config.fps, self.present)
+            self.encoder = Encoder(quality=choice.quality, depth_hint=choice.depth_hint)
         if not self.started:
             self.channel.send_header(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
             self.started = True

@@ -1,0 +1,49 @@
+"""Rate control: lfstream.encode(lf, bpp=T), lfstream encode --bpp and stream --bpp land
+within 15 % of the target and pick the configuration with the better measured quality."""
+
+import json
+
+import numpy as np
+import pytest
+
+import lfstream
+from lfstream.cli import main
+from lfstream.codec.rate import RATE_TOLERANCE, choose_configuration
+from lfstream.metrics import bpp, mpsnr
+from lfstream.synth import synth_clip
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return synth_clip(2, 5, (96, 128), seed=2, noise=1.0, motion=0.3).lf
+
+
+@pytest.mark.parametrize("target", [0.06, 0.12, 0.24])  # a small scene: JPEG headers alone cost ~0.05 bpp
+def test_encode_lands_within_the_tolerance_of_the_target(scene, target):
+    data = lfstream.encode(scene, bpp=target)
+    got = bpp(len(data), scene.shape)
+    assert abs(got - target) / target <= RATE_TOLERANCE, (target, got)
+    assert lfstream.decode(data).shape == scene.shape
+
+
+def test_the_size_estimate_is_exact_and_the_better_candidate_wins(scene):
+    choice = choose_configuration(scene, 0.12, 30.0)
+    data = lfstream.encode(scene, quality=choice.quality, depth_hint=choice.depth_hint)
+    assert bpp(len(data), scene.shape) == pytest.approx(choice.bpp, rel=1e-12)  # predicted without re-encoding
+    inside = [c for c in choice.candidates if abs(c["bpp"] - 0.12) / 0.12 <= RATE_TOLERANCE]
+    assert choice.mpsnr_first_frame == max(c["mpsnr_first_frame"] for c in inside)
+    first = lfstream.decode(lfstream.encode(scene[:1], quality=choice.quality, depth_hint=choice.depth_hint))[0]
+    assert float(mpsnr(scene[0], first)) == pytest.approx(choice.mpsnr_first_frame, abs=1e-6)
+
+
+def test_cli_encode_and_stream_take_bpp(scene, tmp_path, capsys):
+    np.save(tmp_path / "clip.npy", scene)
+    assert main(["encode", str(tmp_path / "clip.npy"), "-o", str(tmp_path / "c.lfs"), "--bpp", "0.12", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert abs(r["bpp"] - 0.12) / 0.12 <= RATE_TOLERANCE and r["rate_control"]["target_bpp"] == 0.12
+    assert main(["stream", str(tmp_path / "clip.npy"), "-o", str(tmp_path / "s"), "--bpp", "0.12", "--json",
+                 "--refocus", "sas", "--mssim-every", "0", "--no-viewer"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert abs(s["bpp"] - 0.12) / 0.12 <= 0.3  # chosen on the first frame, the second may differ
+    with pytest.raises(SystemExit):
+        main(["encode", str(tmp_path / "clip.npy"), "-o", str(tmp_path / "d.lfs"), "--bpp", "0.04", "--quality", "20"])
