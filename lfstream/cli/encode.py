@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import time
 from pathlib import Path
 
 from lfstream.cli._common import add_read_options, emit, float_in, int_in, load_from_args
@@ -31,7 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.codec.encoder import Encoder, encode_file, frames_of
+    from lfstream.codec.encoder import Encoder, encode_file, frames_of, write_stream_file
     from lfstream.io._fs import check_new_file
     from lfstream.metrics import bpp
 
@@ -43,11 +44,15 @@ def run(args: argparse.Namespace) -> int:
     if args.bpp is not None:
         from lfstream.codec.rate import choose_configuration
 
+        # rate control encodes every frame while it searches: its stream is written as it is
+        t0 = time.perf_counter()
         rate = choose_configuration(frames, args.bpp, fps, loaded.present)
         quality, depth_hint = rate.quality, rate.depth_hint
-    enc = Encoder(quality=quality, depth_hint=depth_hint)
-    stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), enc,
-                        fps=fps, present=loaded.present)
+        stats = write_stream_file(args.output, rate.header, rate.packets)
+        stats.encode_s = time.perf_counter() - t0  # the search included
+    else:
+        stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]),
+                            Encoder(quality=quality, depth_hint=depth_hint), fps=fps, present=loaded.present)
     result = dataclasses.asdict(stats)
     result.update({"output": str(args.output), "bpp": bpp(stats.bytes, frames.shape),
                    "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": quality, "depth_hint": depth_hint})

@@ -140,8 +140,8 @@ def encode(
     if bpp is not None:
         from lfstream.codec.rate import choose_configuration
 
-        choice = choose_configuration(frames, bpp, fps, present, hint_options, gain_grid)
-        quality, depth_hint = choice.quality, choice.depth_hint
+        # rate control encoded every frame already: its stream is the answer
+        return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid).stream()
     enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid)
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
@@ -150,19 +150,34 @@ def encode(
     return buf.getvalue()
 
 
-def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tuple[int, int], size: tuple[int, int],
-                encoder: Encoder, fps: float = 30.0, present: np.ndarray | None = None) -> EncodeStats:
-    """Encodes frames into an ``.lfs`` file, written atomically; returns byte counts and timing."""
+def write_stream_file(path: str | os.PathLike, header: StreamHeader, packets: Iterable[Packet]) -> EncodeStats:
+    """Writes a header and packets as an ``.lfs`` file, atomically; returns the byte counts."""
     stats = EncodeStats()
     with atomic_open(Path(path)) as fh:
-        writer = StreamWriter(fh, encoder.header(views, size, fps))
-        for t, frame in enumerate(frames):
-            t0 = time.perf_counter()
-            packet = encoder.encode_frame(frame, t, int(round(t * 1e6 / fps)), present)
-            stats.add(packet, time.perf_counter() - t0)
+        writer = StreamWriter(fh, header)
+        for packet in packets:
             writer.write(packet)
+            stats.add(packet, 0.0)
         stats.bytes = writer.bytes_written
     return stats
 
 
-__all__ = ["ENCODER_NAME", "Encoder", "EncodeStats", "encode", "encode_file", "frames_of"]
+def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tuple[int, int], size: tuple[int, int],
+                encoder: Encoder, fps: float = 30.0, present: np.ndarray | None = None) -> EncodeStats:
+    """Encodes frames into an ``.lfs`` file, written atomically; returns byte counts and timing."""
+    spent = 0.0
+
+    def packets():
+        nonlocal spent
+        for t, frame in enumerate(frames):
+            t0 = time.perf_counter()
+            packet = encoder.encode_frame(frame, t, int(round(t * 1e6 / fps)), present)
+            spent += time.perf_counter() - t0
+            yield packet
+
+    stats = write_stream_file(path, encoder.header(views, size, fps), packets())
+    stats.encode_s = spent
+    return stats
+
+
+__all__ = ["ENCODER_NAME", "Encoder", "EncodeStats", "encode", "encode_file", "write_stream_file", "frames_of"]

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from lfstream.codec.bitstream import Packet, StreamHeader, pack_header
+from lfstream.codec.bitstream import Packet, StreamHeader, pack_header, pack_packet
 from lfstream.codec.jpeg import QUALITY_RANGE, encode_jpeg
 from lfstream.errors import LFValueError
 from lfstream.lightfield import centre_view, to_uint8
@@ -26,31 +26,43 @@ RATE_TOLERANCE = 0.15
 
 @dataclass(frozen=True)
 class RateChoice:
-    """The configuration rate control picked, and what it measured."""
+    """The configuration rate control picked, what it measured, and its stream (header and
+    packets, the same bytes an encoder with this quality and hint setting writes)."""
 
     quality: int
     depth_hint: bool
     bpp: float
     mpsnr_first_frame: float
     candidates: tuple[dict, ...]
+    header: StreamHeader
+    packets: tuple[Packet, ...]
+
+    def stream(self) -> bytes:
+        """The chosen ``.lfs`` stream."""
+        return pack_header(self.header) + b"".join(pack_packet(p) for p in self.packets)
 
 
-def _stream_bytes(header: StreamHeader, quality: int, packets: list[Packet], jpeg_sizes: list[int]) -> int:
-    # the header at this quality (it records it), every packet less its JPEG plus the JPEG at it
+def _at_quality(header: StreamHeader, packets: list[Packet], quality: int,
+                images: list[bytes]) -> tuple[StreamHeader, list[Packet]]:
+    """The stream at another JPEG quality: the header records it, each packet carries its
+    centre view's JPEG at it; hints and gains do not depend on it."""
     at_q = replace(header, quality=quality, meta={**header.meta, "quality": quality})
-    return len(pack_header(at_q)) + sum(p.nbytes - len(p.image) + n for p, n in zip(packets, jpeg_sizes))
+    return at_q, [replace(p, image=img) for p, img in zip(packets, images)]
 
 
-def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeader, target_bytes: float) -> tuple[int, int]:
+def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeader,
+                  target_bytes: float) -> tuple[int, int, list[bytes]]:
     """The JPEG quality whose stream is closest to ``target_bytes`` (bisection; sizes grow
-    with quality), and that stream's size."""
+    with quality), that stream's size and its centre-view JPEGs."""
     centres = [centre_view(to_uint8(f)) for f in frames]
-    cache: dict[int, int] = {}
+    cache: dict[int, tuple[int, list[bytes]]] = {}
 
     def size(q: int) -> int:
         if q not in cache:
-            cache[q] = _stream_bytes(header, q, packets, [len(encode_jpeg(c, q)) for c in centres])
-        return cache[q]
+            images = [encode_jpeg(c, q) for c in centres]
+            at_q, moved = _at_quality(header, packets, q, images)
+            cache[q] = (len(pack_header(at_q)) + sum(p.nbytes for p in moved), images)
+        return cache[q][0]
 
     lo, hi = QUALITY_RANGE
     while hi - lo > 1:
@@ -60,7 +72,7 @@ def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeade
         else:
             hi = mid
     q = min((lo, hi), key=lambda k: abs(size(k) - target_bytes))
-    return q, size(q)
+    return q, size(q), cache[q][1]
 
 
 def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, present: np.ndarray | None = None,
@@ -72,7 +84,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         - frames: ``(T, U, V, H, W, 3)``
     """
     from lfstream.codec.decoder import decode
-    from lfstream.codec.encoder import Encoder, encode
+    from lfstream.codec.encoder import Encoder
     from lfstream.codec.hint import HintOptions
     from lfstream.metrics import bpp, mpsnr
 
@@ -85,18 +97,22 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         enc = Encoder(quality=50, depth_hint=hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid)
         header = enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
         packets = [enc.encode_frame(f, t, int(round(t * 1e6 / fps)), present) for t, f in enumerate(frames)]
-        q, n = _best_quality(frames, packets, header, target_bytes)
-        first = encode(frames[:1], quality=q, depth_hint=hint, fps=fps, hint_options=hint_options, gain_grid=gain_grid,
-                       present=present)
+        q, n, images = _best_quality(frames, packets, header, target_bytes)
+        at_q, moved = _at_quality(header, packets, q, images)
+        first = pack_header(at_q) + pack_packet(moved[0])  # the first frame is a key frame: it decodes alone
         score = float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
-        candidates.append({"quality": q, "depth_hint": hint, "bpp": bpp(n, frames.shape), "mpsnr_first_frame": score})
+        candidates.append({"quality": q, "depth_hint": hint, "bpp": bpp(n, frames.shape), "mpsnr_first_frame": score,
+                           "_stream": (at_q, tuple(moved))})
     # within the tolerance where possible, then the better measured quality
     def rank(c: dict) -> tuple:
         off = abs(c["bpp"] - target_bpp) / target_bpp
         return (off > RATE_TOLERANCE, -c["mpsnr_first_frame"] if off <= RATE_TOLERANCE else off)
 
     best = min(candidates, key=rank)
-    return RateChoice(best["quality"], best["depth_hint"], best["bpp"], best["mpsnr_first_frame"], tuple(candidates))
+    header_q, packets_q = best["_stream"]
+    report = tuple({k: v for k, v in c.items() if k != "_stream"} for c in candidates)
+    return RateChoice(best["quality"], best["depth_hint"], best["bpp"], best["mpsnr_first_frame"], report, header_q,
+                      packets_q)
 
 
 __all__ = ["RATE_TOLERANCE", "RateChoice", "choose_configuration"]
