@@ -89,13 +89,6 @@ def progress_callback(args: argparse.Namespace):
     return stderr_progress if (args.progress or (sys.stderr.isatty() and not args.json)) else None
 
 
-def interrupted_summary() -> dict:
-    """The summary of a run stopped (Ctrl-C) before any stage ran."""
-    return {"frames": 0, "fps": None, "wall_s": None, "bpp": None, "bytes": 0, "mpsnr": None, "mssim": None,
-            "per_frame": [], "mssim_frames": [], "stages": {}, "lost": 0, "transport": None, "refocus": None,
-            "skips": None, "interrupted": True, "outputs": []}
-
-
 def _text(summary: dict, out: Path | None) -> str:
     lines = [f"{summary['frames']} frame(s), {summary['fps'] or 0} frames/s end to end"
              + (f", {summary['bpp']:.5f} bpp" if summary.get("bpp") else "")
@@ -139,5 +132,5 @@ def report(args: argparse.Namespace, summary: dict, out: Path | None) -> None:
     emit(args, summary, lambda s: _text(s, out))
 
 
-__all__ = ["add_pipeline_options", "check_output_folder", "interrupted_summary", "pipeline_config", "progress_callback",
+__all__ = ["add_pipeline_options", "check_output_folder", "pipeline_config", "progress_callback",
            "report", "write_page"]

@@ -23,6 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from lfstream.io._fs import fresh_dir, prepare_output_dir
     from lfstream.stream import Pipeline
+    from lfstream.stream.report import stopped_summary
     from lfstream.stream.transport import TcpReceiver
 
     _pipeline.check_output_folder(args.output)
@@ -36,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             summary = Pipeline(None, cfg, out, receiver=receiver, progress=_pipeline.progress_callback(args)).run()
         except KeyboardInterrupt:
-            summary = _pipeline.interrupted_summary()
+            summary = stopped_summary("tcp")
         _pipeline.write_page(args, summary, out)
         _pipeline.report(args, summary, out)
         if not args.keep_open or summary["interrupted"]:

@@ -29,6 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from lfstream.io._fs import fresh_dir, prepare_output_dir
     from lfstream.stream import Pipeline, Source, file_source, synthetic_source
+    from lfstream.stream.report import stopped_summary
     from lfstream.stream.transport import TcpSender, parse_address
 
     _pipeline.check_output_folder(args.output)
@@ -51,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
         summary = pipe.run()
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)
-        summary = _pipeline.interrupted_summary()
+        summary = stopped_summary("tcp" if args.to else args.transport)
     viewer = _pipeline.write_page(args, summary, out)
     _pipeline.report(args, summary, out)
     if viewer is not None and not args.json:

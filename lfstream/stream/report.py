@@ -122,6 +122,15 @@ def build_summary(*, wall_s: float, frames: int, stages: dict[str, StageStats], 
     return out
 
 
+def stopped_summary(transport: str) -> dict:
+    """The summary of a run stopped (Ctrl-C) before any stage ran: the same keys as every
+    summary, nothing done, ``interrupted`` true."""
+    return build_summary(wall_s=0.0, frames=0, stages={}, rate=RateStats(), quality=QualityStats(),
+                         static=StaticSkipStats(enabled=False), planes=PlaneSkipStats(enabled=False), receive=None,
+                         transport=transport, refocus=None, hance={"mode": None, "ran": False}, interrupted=True,
+                         outputs=[])
+
+
 def write_summary(out: Path, summary: dict) -> None:
     """``summary.json`` in ``out``, written atomically."""
     # strict JSON (RFC 8259): the summary caps PSNR, and a non-finite value left would be a bug
@@ -135,4 +144,4 @@ def stderr_progress(line: str) -> None:
 
 
 __all__ = ["StageStats", "RateStats", "StaticSkipStats", "PlaneSkipStats", "QualityStats", "build_summary",
-           "write_summary", "stderr_progress"]
+           "stopped_summary", "write_summary", "stderr_progress"]

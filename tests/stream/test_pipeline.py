@@ -290,3 +290,12 @@ def test_auto_focal_planes_fit_the_scene_and_are_recorded(tmp_path):
     # the seed's stack on request
     seed = Pipeline(iter(clip.lf), StreamConfig(refocus="sas", alphas="seed", metrics=False, save=()), None).run()
     assert len(seed["planes"]) == 16 and seed["planes"][0]["alpha"] == pytest.approx(0.125)
+
+
+def test_a_run_stopped_before_its_stages_reports_the_same_keys(tmp_path):
+    from lfstream.stream.report import stopped_summary
+
+    full = Pipeline(small_source(frames=1), StreamConfig(refocus="sas", metrics=False, save=()), None).run()
+    stopped = stopped_summary("inproc")
+    assert set(stopped) == set(full) and stopped["interrupted"] is True and stopped["frames"] == 0
+    json.dumps(stopped, allow_nan=False)  # strict JSON too
