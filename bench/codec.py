@@ -7,22 +7,21 @@ depth-of-field image's PSNR/SSIM, near/far refocused images' PSNR/SSIM (seed: al
 and 1.5), and encode/decode times measured here by the harness (median of --runs). All
 metrics on the 8-bit reconstructions.
 
-    python bench/codec.py [--json [FILE]] [--runs N] [--quick] [--no-rd]
+    python bench/codec.py [--json [FILE]] [--runs N] [--quick]
+
+Rate-distortion curves over the whole range, every preset and Bjontegaard deltas: bench/rd.py.
 """
 
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
-import cv2
 import numpy as np
 from _harness import ROOT, emit, parser, timeit
 
 import lfstream
 from lfstream.codec.baseline import decode_views, encode_at_bpp, encode_views
-from lfstream.errors import LFValueError
-from lfstream.metrics import bd_psnr, bd_rate, bpp, capped, dof_psnr, dof_ssim, mpsnr, mssim, psnr, ssim
+from lfstream.metrics import bpp, capped, dof_psnr, dof_ssim, mpsnr, mssim, psnr, ssim
 from lfstream.refocus import focal_stack
 from lfstream.synth import synth_clip
 
@@ -74,83 +73,8 @@ def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = 
     return rows
 
 
-RD_POINTS = {
-    "lfstream flat": [10, 25, 50, 75, 95],
-    "lfstream hint": [10, 25, 50, 75, 95],
-    "hevc": [22, 27, 32, 37, 42, 47],
-    "av1": [20, 30, 40, 50, 60],
-}
-
-
-def rd_curves(name: str, lf: np.ndarray) -> dict:
-    """Rate-distortion points of every method and Bjontegaard deltas of lfstream against the
-    baselines (MPSNR; None where the curves do not overlap)."""
-    curves = {}
-    for method, params in RD_POINTS.items():
-        pts = []
-        for q in params:
-            if method.startswith("lfstream"):
-                data = lfstream.encode(lf, quality=q, depth_hint=method.endswith("hint"))
-                rec = lfstream.decode(data)[0]
-                n = len(data)
-            else:
-                data = encode_views(lf, method, q, constant_qp=True)
-                rec = decode_views(data, method, lf.shape[:2], lf.shape[2:4])
-                n = len(data)
-            pts.append({"param": q, "bpp": bpp(n, lf.shape), "mpsnr": capped(mpsnr(lf, rec)), "mssim": float(mssim(lf, rec))})
-        curves[method] = pts
-    deltas = {}
-    for ours in ("lfstream flat", "lfstream hint"):
-        for anchor in ("hevc", "av1"):
-            a, b = curves[anchor], curves[ours]
-            key = f"{ours} vs {anchor}"
-            try:
-                deltas[key] = {"bd_rate_pct": bd_rate([p["bpp"] for p in a], [p["mpsnr"] for p in a],
-                                                      [p["bpp"] for p in b], [p["mpsnr"] for p in b]),
-                               "bd_psnr_db": bd_psnr([p["bpp"] for p in a], [p["mpsnr"] for p in a],
-                                                     [p["bpp"] for p in b], [p["mpsnr"] for p in b])}
-            except LFValueError as exc:
-                deltas[key] = {"bd_rate_pct": None, "bd_psnr_db": None, "why": str(exc)}
-    return {"lf": name, "curves": curves, "bjontegaard": deltas}
-
-
-def plot_rd(rd: dict, path: Path) -> None:
-    """MPSNR against log bpp, one line per method, drawn with OpenCV (no plotting dependency)."""
-    w, h, m = 900, 560, 70
-    img = np.full((h, w, 3), 255, np.uint8)
-    pts = [p for c in rd["curves"].values() for p in c]
-    x0, x1 = np.log10(min(p["bpp"] for p in pts)), np.log10(max(p["bpp"] for p in pts))
-    y0, y1 = min(p["mpsnr"] for p in pts) - 1, max(p["mpsnr"] for p in pts) + 1
-
-    def xy(p):
-        return (int(m + (np.log10(p["bpp"]) - x0) / max(x1 - x0, 1e-9) * (w - 2 * m)),
-                int(h - m - (p["mpsnr"] - y0) / max(y1 - y0, 1e-9) * (h - 2 * m)))
-
-    cv2.rectangle(img, (m, m), (w - m, h - m), (0, 0, 0), 1)
-    for k in range(5):
-        lx = x0 + k * (x1 - x0) / 4
-        ly = y0 + k * (y1 - y0) / 4
-        cv2.putText(img, f"{10 ** lx:.3g}", (m + int(k * (w - 2 * m) / 4) - 20, h - m + 20), cv2.FONT_HERSHEY_SIMPLEX,
-                    0.45, (0, 0, 0), 1)
-        cv2.putText(img, f"{ly:.1f}", (10, h - m - int(k * (h - 2 * m) / 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
-    cv2.putText(img, f"{rd['lf']}: MPSNR (dB) vs bits per pixel (log)", (m, 40), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 1)
-    colours = [(200, 60, 20), (20, 140, 20), (20, 20, 200), (160, 20, 160)]
-    for k, (method, curve) in enumerate(rd["curves"].items()):
-        c = colours[k % len(colours)]
-        p = [xy(q) for q in sorted(curve, key=lambda q: q["bpp"])]
-        for a, b in zip(p, p[1:]):
-            cv2.line(img, a, b, c, 2, cv2.LINE_AA)
-        for q in p:
-            cv2.circle(img, q, 4, c, -1, cv2.LINE_AA)
-        cv2.putText(img, method, (w - m - 170, m + 25 + 22 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.55, c, 2)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(path), img)
-
-
 def main(argv=None) -> dict:
-    p = parser(__doc__)
-    p.add_argument("--no-rd", action="store_true", help="skip the rate-distortion curves (slow)")
-    args = p.parse_args(argv)
+    args = parser(__doc__).parse_args(argv)
     runs = 1 if args.quick else args.runs
     size = (128, 160) if args.quick else (375, 540)
     cases = [("synthetic noisy", synth_clip(1, 7, size, seed=21, noise=2.0, vignetting=0.3, motion=0, camera_pan=0).lf[0])]
@@ -160,20 +84,10 @@ def main(argv=None) -> dict:
         if (data / folder).exists() and not (args.quick and name != "seahorse5x5"):
             lf = lfstream.read_lf(data / folder)
             cases.append((name, lf[:, :, :256, 128:384] if args.quick else lf))
-    results, rd = [], []
+    results = []
     for name, lf in cases:
         results += evaluate(name, lf, runs)
-        if args.no_rd:
-            continue
-        curves = rd_curves(name, lf)
-        rd.append(curves)
-        plot_rd(curves, ROOT / "bench" / "results" / f"codec_rd_{name.split()[0]}.png")
-        for key, d in curves["bjontegaard"].items():
-            if d["bd_rate_pct"] is None:
-                print(f"{name:22s} {key:26s} BD: curves do not overlap")
-            else:
-                print(f"{name:22s} {key:26s} BD-rate {d['bd_rate_pct']:+8.1f} %  BD-PSNR {d['bd_psnr_db']:+6.2f} dB")
-    return emit(args, results, {"rate_distortion": rd})
+    return emit(args, results)
 
 
 if __name__ == "__main__":

@@ -108,3 +108,22 @@ def test_numpy_and_torch_psnr_paths_agree(rng):
     fa, fb = a.astype(np.float32) / 255, b.astype(np.float32) / 255
     assert np.allclose(psnr(fa, fb), ref, atol=1e-4)
     assert psnr(a[0, 0], a[0, 0]) == np.inf
+
+
+def test_bd_pchip_uses_the_pareto_front_and_agrees_with_the_cubic_fit_on_smooth_curves():
+    from lfstream.metrics import bd_psnr, bd_rate, pareto_front
+
+    rates = np.array([0.005, 0.01, 0.02, 0.04, 0.08])
+    psnrs = 28 + 4 * np.log2(rates / 0.005) ** 0.8
+    # a dominated point (more bits, lower quality: the seahorse-at-q70 kind of dip) is ignored
+    noisy_r, noisy_d = np.append(rates, 0.03), np.append(psnrs, psnrs[1])
+    r, d = pareto_front(np.log10(noisy_r), noisy_d)
+    assert len(r) == len(rates) and np.all(np.diff(r) > 0) and np.all(np.diff(d) > 0)
+    assert bd_rate(rates, psnrs, noisy_r * 0.7, noisy_d) == pytest.approx(-30.0, abs=1e-6)
+    shifted = bd_psnr(rates, psnrs, rates, psnrs + 0.25)
+    assert shifted == pytest.approx(0.25, abs=1e-9)
+    # smooth curves: piecewise cubic and the single cubic fit agree closely
+    other = 27.5 + 4.2 * np.log2(rates / 0.005) ** 0.8
+    assert bd_rate(rates, psnrs, rates, other) == pytest.approx(bd_rate(rates, psnrs, rates, other, method="cubic"), abs=1.5)
+    with pytest.raises(LFValueError):
+        bd_rate(rates, psnrs, rates, other, method="spline")

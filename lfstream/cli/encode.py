@@ -8,18 +8,21 @@ import time
 from pathlib import Path
 
 from lfstream.cli._common import add_read_options, emit, float_in, int_in, load_from_args
+from lfstream.codec.encoder import PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
 
-HELP = "encode a light field or LF video to an .lfs stream (JPEG centre view)"
+HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre view + depth hint)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path)
     p.add_argument("-o", "--output", type=Path, required=True, help="the .lfs file (never overwritten without --overwrite)")
     rate = p.add_mutually_exclusive_group()
-    rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="JPEG quality of the centre view (default 50)")
+    rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="quality of the centre view (default 50)")
     rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target size in bits per pixel: rate control picks the "
-                      "JPEG quality and whether to send the hint (best first-frame MPSNR within 15 %%)")
+                      "preset (unless --preset), quality, hint and hint precision (best first-frame MPSNR within 15 %%)")
+    p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG, the default), balanced "
+                   "(AV1, SVT preset 12), best (AV1, SVT preset 8); with --bpp, the default is to try all three")
     hint = p.add_mutually_exclusive_group()
     hint.add_argument("--depth-hint", dest="depth_hint", action="store_true", default=True,
                       help="send the encoder's disparity estimate (the default)")
@@ -40,25 +43,27 @@ def run(args: argparse.Namespace) -> int:
     loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
     frames = frames_of(loaded.lf)
     fps = args.fps or loaded.fps or 30.0
-    quality, depth_hint, rate = args.quality, args.depth_hint, None
+    quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or "fast"
     if args.bpp is not None:
         from lfstream.codec.rate import choose_configuration
 
         # rate control encodes every frame while it searches: its stream is written as it is
         t0 = time.perf_counter()
-        rate = choose_configuration(frames, args.bpp, fps, loaded.present)
-        quality, depth_hint = rate.quality, rate.depth_hint
+        rate = choose_configuration(frames, args.bpp, fps, loaded.present,
+                                    presets=(args.preset,) if args.preset else tuple(PRESETS))
+        quality, depth_hint, preset = rate.quality, rate.depth_hint, rate.preset
         stats = write_stream_file(args.output, rate.header, rate.packets)
         stats.encode_s = time.perf_counter() - t0  # the search included
     else:
         stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]),
-                            Encoder(quality=quality, depth_hint=depth_hint), fps=fps, present=loaded.present)
+                            Encoder(quality=quality, depth_hint=depth_hint, preset=preset), fps=fps, present=loaded.present)
     result = dataclasses.asdict(stats)
     result.update({"output": str(args.output), "bpp": bpp(stats.bytes, frames.shape),
-                   "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": quality, "depth_hint": depth_hint})
+                   "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": quality, "depth_hint": depth_hint,
+                   "preset": preset})
     if rate is not None:
         result["rate_control"] = {"target_bpp": args.bpp, "candidates": list(rate.candidates)}
     emit(args, result, lambda r: f"{r['frames']} frame(s) -> {args.output}: {r['bytes']} bytes, {r['bpp']:.5f} bpp"
-         + (f" (hint {r['hint_bpp']:.5f} bpp)" if depth_hint else "") + f", JPEG q{quality}"
+         + (f" (hint {r['hint_bpp']:.5f} bpp)" if depth_hint else "") + f", {preset} q{quality}"
          + f", encoded in {r['encode_s']:.3f} s")
     return 0

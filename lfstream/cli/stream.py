@@ -7,6 +7,7 @@ from pathlib import Path
 
 from lfstream.cli import _pipeline
 from lfstream.cli._common import add_read_options, float_in, int_in, read_options
+from lfstream.codec.encoder import PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.stream.config import TRANSPORTS
 
@@ -20,7 +21,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     rate = p.add_mutually_exclusive_group()
     rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="JPEG quality of the centre view")
     rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target bits per pixel: rate control on the first frame")
-    p.add_argument("--no-depth-hint", action="store_true", help="send only the JPEG centre view")
+    p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG, the default), balanced "
+                   "or best (AV1); with --bpp, the default is to try all three")
+    p.add_argument("--no-depth-hint", action="store_true", help="send only the centre view")
     p.add_argument("--frames", type=int_in((1, 1 << 20)), default=12, help="frames of the built-in clip")
     _pipeline.add_pipeline_options(p)
     add_read_options(p)
@@ -45,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             source = file_source(args.input, read_options(args))
         cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp, depth_hint=not args.no_depth_hint,
-                                        transport=args.transport, fps=source.fps or 30.0)
+                                        preset=args.preset, transport=args.transport, fps=source.fps or 30.0)
         pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
                         present=source.present)

@@ -1,6 +1,9 @@
 """The ``.lfs`` bitstream: a file header, then one packet per light-field frame.
 
-Version 1 layout (all integers little-endian):
+Version 1 layout (all integers little-endian); version 2 is the same layout with one more
+centre-view codec (``codec`` 2: an AV1 key frame, :mod:`lfstream.codec.intra`). A writer
+stamps the lowest version that expresses its stream, so a JPEG stream is still version 1 and
+version-1 readers keep reading it; this reader reads both.
 
 File header::
 
@@ -10,8 +13,8 @@ File header::
     views        u8, u8   U, V
     size         u16, u16 H, W
     fps_milli    u32      frame rate x 1000
-    codec        u8       1 = JPEG centre view
-    quality      u8       JPEG quality 1..100
+    codec        u8       centre view: 1 = JPEG (version 1 and 2), 2 = AV1 key frame (version 2)
+    quality      u8       centre-view quality 1..100 (JPEG quality; AV1: CRF 63..1)
     reserved     u16      0
     meta_len     u32      length of the metadata block
     meta         bytes    zstd-compressed UTF-8 JSON (encoder name, version, options)
@@ -22,7 +25,7 @@ Packet (the unit every transport carries)::
     sync         4 bytes  b"LFPK"
     seq          u32      frame sequence number, from 0
     timestamp_us u64      presentation time in microseconds
-    image_len    u32      length of the JPEG centre view
+    image_len    u32      length of the coded centre view
     hint_len     u32      length of the depth hint (0: none)
     gain_len     u32      length of the per-view gain maps (0: none)
     meta_len     u32      length of the per-frame metadata (0: none)
@@ -54,8 +57,13 @@ from lfstream.lightfield import MAX_VIEW_SIDE, MAX_VIEWS_PER_AXIS
 
 MAGIC = b"\x89LFS"
 SYNC = b"LFPK"
-VERSION = 1
+VERSION = 2  # the newest this module reads and writes; see stream_version()
+VERSIONS = (1, 2)
 CODEC_JPEG = 1
+CODEC_AV1 = 2
+CODEC_NAMES = {CODEC_JPEG: "jpeg", CODEC_AV1: "av1"}
+#: The centre-view codecs each version may carry.
+VERSION_CODECS = {1: (CODEC_JPEG,), 2: (CODEC_JPEG, CODEC_AV1)}
 FLAG_HINT = 1
 
 _HEADER_FIXED = struct.Struct("<4sHHBBHHIBBHI")  # up to and including meta_len
@@ -86,6 +94,11 @@ class StreamHeader:
     codec: int = CODEC_JPEG
     meta: dict = field(default_factory=dict)
 
+    @property
+    def version(self) -> int:
+        """The lowest format version that carries this stream (see :func:`stream_version`)."""
+        return stream_version(self.codec)
+
     def max_payload(self, limits: Limits) -> int:
         h, w = self.size
         return int(limits.max_payload_factor * h * w * 3) + (1 << 20)
@@ -105,6 +118,14 @@ class Packet:
     @property
     def nbytes(self) -> int:
         return _PACKET_FIXED.size + len(self.image) + len(self.hint) + len(self.gain) + len(self.meta) + _CRC.size
+
+
+def stream_version(codec: int) -> int:
+    """The lowest ``.lfs`` version that can carry a centre view in ``codec``."""
+    for version in VERSIONS:
+        if codec in VERSION_CODECS[version]:
+            return version
+    raise BitstreamError(f"header: unknown codec id {codec}")
 
 
 def _compress_json(obj: dict) -> bytes:
@@ -138,9 +159,8 @@ def check_header_values(header: StreamHeader, limits: Limits = Limits()) -> None
     if u * v * h * w * 3 > limits.max_frame_bytes:
         raise BitstreamError(f"header: a decoded frame of {u}x{v}x{h}x{w}x3 bytes exceeds the limit of {limits.max_frame_bytes}")
     if not (1 <= header.quality <= 100):
-        raise BitstreamError(f"header: JPEG quality {header.quality} outside 1..100")
-    if header.codec != CODEC_JPEG:
-        raise BitstreamError(f"header: unknown codec id {header.codec}")
+        raise BitstreamError(f"header: centre-view quality {header.quality} outside 1..100")
+    stream_version(header.codec)  # raises for an unknown codec
     if not (0 < header.fps <= 10000):
         raise BitstreamError(f"header: frame rate {header.fps} outside (0, 10000]")
 
@@ -149,7 +169,7 @@ def pack_header(header: StreamHeader) -> bytes:
     check_header_values(header)
     meta = _compress_json(header.meta)
     fixed = _HEADER_FIXED.pack(
-        MAGIC, VERSION, FLAG_HINT if header.has_hint else 0, header.views[0], header.views[1],
+        MAGIC, header.version, FLAG_HINT if header.has_hint else 0, header.views[0], header.views[1],
         header.size[0], header.size[1], int(round(header.fps * 1000)), header.codec, header.quality, 0, len(meta),
     )
     body = fixed + meta
@@ -177,8 +197,10 @@ def read_header(fh: BinaryIO, limits: Limits = Limits()) -> StreamHeader:
     magic, version, flags, u, v, h, w, fps_milli, codec, quality, _res, meta_len = _HEADER_FIXED.unpack(fixed)
     if magic != MAGIC:
         raise BitstreamError("header: not an lfstream .lfs stream (bad magic)")
-    if version != VERSION:
-        raise BitstreamError(f"header: unsupported version {version} (this reader knows {VERSION})")
+    if version not in VERSIONS:
+        raise BitstreamError(f"header: unsupported version {version} (this reader knows {', '.join(map(str, VERSIONS))})")
+    if codec not in VERSION_CODECS[version]:
+        raise BitstreamError(f"header: codec id {codec} is not part of version {version}")
     if meta_len > limits.max_meta_bytes:
         raise BitstreamError(f"header: metadata length {meta_len} exceeds {limits.max_meta_bytes}")
     meta = _read_exact(fh, meta_len)
@@ -272,6 +294,11 @@ def split_stream(data: bytes, limits: Limits = Limits()) -> tuple[StreamHeader, 
 __all__ = [
     "MAGIC",
     "VERSION",
+    "VERSIONS",
+    "CODEC_JPEG",
+    "CODEC_AV1",
+    "CODEC_NAMES",
+    "stream_version",
     "Limits",
     "StreamHeader",
     "Packet",

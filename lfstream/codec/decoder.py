@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.codec.bitstream import Limits, Packet, StreamHeader, iter_packets, read_header
+from lfstream.codec.bitstream import CODEC_JPEG, Limits, Packet, StreamHeader, iter_packets, read_header
 from lfstream.codec.hint import HintDecoder, HintReferenceError
-from lfstream.codec.jpeg import decode_jpeg
+from lfstream.codec.intra import decode_centre
 from lfstream.codec.shading import apply_gains, decode_gains
 from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.errors import BitstreamError, LFFileError, LFValueError
@@ -54,7 +54,8 @@ class Decoder:
         depth: ``"auto"`` (the hint where the stream has one, else flat), ``"hint"``,
             ``"flat"`` or ``"net"`` (Depth-Net; its fast preset refines the depth hint).
         occlusion: occlusion-aware per-view disparity in the warp (hint mode).
-        hance: ``"auto"`` (JPEG-Hance where it helps: stream quality <= HANCE_MAX_QUALITY[preset]),
+        hance: ``"auto"`` (JPEG-Hance where it helps: a JPEG centre view at quality <=
+            HANCE_MAX_QUALITY[preset]),
             ``"on"`` or ``"off"``.
         device: where the networks run (``"cpu"`` or ``"cuda"``).
         preset: network preset whose shipped weights are used.
@@ -79,7 +80,8 @@ class Decoder:
             raise LFValueError("depth='hint': this stream carries no depth hint (encode with depth_hint=True)")
         from lfstream.models.registry import load_model
 
-        use_hance = self.hance == "on" or (self.hance == "auto"
+        # JPEG-Hance is trained on JPEG artefacts: "auto" never runs it on an AV1 centre view
+        use_hance = self.hance == "on" or (self.hance == "auto" and self.header.codec == CODEC_JPEG
                                            and self.header.quality <= HANCE_MAX_QUALITY.get(self.preset, 0))
         self._hance = load_model("jpeg_hance", self.preset, self.device) if use_hance else None
         self._hints = HintDecoder()
@@ -105,12 +107,12 @@ class Decoder:
         return self.depth in ("hint", "net") or (self.depth == "auto" and self.header.has_hint)
 
     def decode_centres(self, packets: list[Packet]) -> np.ndarray:
-        """JPEG decode and (where enabled) JPEG-Hance of the packets' centre views, batched.
+        """Centre-view decode (JPEG or AV1) and, where enabled, JPEG-Hance, batched.
 
         Shape:
             - output: ``(B, H, W, 3)`` uint8
         """
-        centres = np.stack([decode_jpeg(p.image, self.header.size, p.seq) for p in packets])
+        centres = np.stack([decode_centre(p.image, self.header.codec, self.header.size, p.seq) for p in packets])
         if self._hance is not None:
             from lfstream.models.jpeg_hance import restore_images
 

@@ -1,6 +1,7 @@
-"""The encoder (seed chapter 3): per frame, the centre view as a JPEG; with the depth hint
-also the centre view's disparity (:mod:`lfstream.codec.hint`); per-view shading gains
-where the views differ in brightness (:mod:`lfstream.codec.shading`).
+"""The encoder (seed chapter 3): per frame, the centre view as a JPEG (or, in the
+``balanced`` and ``best`` presets, an AV1 key frame: :mod:`lfstream.codec.intra`); with the
+depth hint also the centre view's disparity (:mod:`lfstream.codec.hint`); per-view shading
+gains where the views differ in brightness (:mod:`lfstream.codec.shading`).
 
 Determinism: the same input and options give the same bytes (OpenCV's JPEG encoder,
 fixed zstd levels, sorted JSON metadata).
@@ -19,13 +20,32 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter
 from lfstream.codec.hint import HintOptions, HintTracker
-from lfstream.codec.jpeg import QUALITY_RANGE, encode_jpeg
+from lfstream.codec.intra import CentreCoding, encode_centre
+from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.shading import encode_gains, measure_gains, shading_present
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.io._fs import atomic_open
 from lfstream.lightfield import centre_view, check_finite, check_lf, to_uint8
 
 ENCODER_NAME = "lfstream-jpeg-centre"
+
+#: Named speed/size trade-offs of the centre view's coding (bench/rd.py measures them):
+#: ``fast`` is the seed's JPEG (under 1 ms a view); ``balanced`` an AV1 key frame at SVT-AV1
+#: preset 12 (20-30 ms, 35-75 % fewer centre bytes at equal PSNR on the shared samples);
+#: ``best`` SVT-AV1 preset 8 (35-55 ms, a further 0.7-1.4 dB at equal bytes).
+PRESETS: dict[str, CentreCoding] = {
+    "fast": CentreCoding("jpeg"),
+    "balanced": CentreCoding("av1", speed=12),
+    "best": CentreCoding("av1", speed=8),
+}
+DEFAULT_PRESET = "fast"
+
+
+def preset_coding(preset: str) -> CentreCoding:
+    """The centre coding of a named preset."""
+    if preset not in PRESETS:
+        raise LFValueError(f"preset: one of {', '.join(PRESETS)}, got {preset!r}")
+    return PRESETS[preset]
 
 
 @dataclass
@@ -36,14 +56,18 @@ class Encoder:
         quality: JPEG quality of the centre view (1..100).
         depth_hint: also send the encoder's disparity estimate.
         hint_options: plane-sweep and coding options of the hint.
+        preset: the centre view's coding (:data:`PRESETS`: ``fast`` JPEG, ``balanced`` and
+            ``best`` AV1).
     """
 
     quality: int = 50
     depth_hint: bool = True
     hint_options: HintOptions = field(default_factory=HintOptions)
     gain_grid: int = 4  # per-view brightness gains on a grid x grid mesh; 0 sends none
+    preset: str = DEFAULT_PRESET
 
     def __post_init__(self) -> None:
+        self.coding = preset_coding(self.preset)
         lo, hi = QUALITY_RANGE
         if not isinstance(self.quality, (int, np.integer)) or not lo <= self.quality <= hi:
             raise LFValueError(f"quality: an integer in {lo}..{hi}, got {self.quality!r}")
@@ -56,9 +80,13 @@ class Encoder:
         from lfstream import __version__
 
         meta = {"encoder": ENCODER_NAME, "version": __version__, "quality": int(self.quality), "gain_grid": self.gain_grid}
+        if self.coding.codec != "jpeg":  # JPEG streams keep the version-1 header byte for byte
+            meta["preset"] = self.preset
+            meta["centre"] = self.coding.as_meta(self.quality)
         if self.depth_hint:
             meta["hint"] = self.hint_options.as_meta()
-        return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint, meta=meta)
+        return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint,
+                            codec=self.coding.codec_id, meta=meta)
 
     def encode_frame(self, lf: np.ndarray, seq: int, timestamp_us: int, present: np.ndarray | None = None) -> Packet:
         """One ``(U, V, H, W, 3)`` frame (uint8, or float in [0, 1]) to a packet.
@@ -77,7 +105,7 @@ class Encoder:
             raise LFValueError(f"frame {seq}: expected 3 colour channels, got {lf.shape[-1]}")
         check_finite(lf, f"frame {seq}")
         frame = to_uint8(np.asarray(lf))
-        image = encode_jpeg(centre_view(frame), self.quality)
+        image = encode_centre(centre_view(frame), self.quality, self.coding)
         hint = b""
         if self.depth_hint:
             hint = self._hints.encode(frame, seq, present)
@@ -120,13 +148,16 @@ def encode(
     gain_grid: int = 4,
     present: np.ndarray | None = None,
     bpp: float | None = None,
+    preset: str | None = None,
 ) -> bytes:
     """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
 
     ``present``: the ``(U, V)`` mask of views that exist, for light fields read with missing
     views (the centre view must exist); the decoder reconstructs all views. ``bpp``: a
     target size in bits per pixel instead of ``quality`` and ``depth_hint``: rate control
-    (:mod:`lfstream.codec.rate`) picks the JPEG quality and whether to send the hint.
+    (:mod:`lfstream.codec.rate`) picks the quality, whether to send the hint and, unless
+    ``preset`` names one, the preset. ``preset``: the centre view's coding (:data:`PRESETS`;
+    default ``fast``, the seed's JPEG).
 
     Raises:
         LFStreamError: bad shape, dtype, non-finite values or parameters.
@@ -141,8 +172,10 @@ def encode(
         from lfstream.codec.rate import choose_configuration
 
         # rate control encoded every frame already: its stream is the answer
-        return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid).stream()
-    enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid)
+        presets = (preset,) if preset is not None else tuple(PRESETS)
+        return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, presets=presets).stream()
+    enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid,
+                  preset=preset or DEFAULT_PRESET)
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
     for t, frame in enumerate(frames):
@@ -180,4 +213,5 @@ def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tu
     return stats
 
 
-__all__ = ["ENCODER_NAME", "Encoder", "EncodeStats", "encode", "encode_file", "write_stream_file", "frames_of"]
+__all__ = ["ENCODER_NAME", "PRESETS", "DEFAULT_PRESET", "preset_coding", "Encoder", "EncodeStats", "encode", "encode_file",
+           "write_stream_file", "frames_of"]

@@ -48,6 +48,9 @@ class StreamConfig:
     depth_hint: bool = True
     # a target size in bits per pixel: rate control picks quality and hint on the first frame
     bpp: float | None = None
+    # the centre view's coding (lfstream.codec.encoder.PRESETS); None: "fast", or with bpp
+    # every preset is a rate-control candidate
+    preset: str | None = None
     depth: str = "auto"
     hance: str = "auto"
     refocus: str = "auto"
@@ -76,6 +79,10 @@ class StreamConfig:
         check_range("quality", self.quality, QUALITY_RANGE)
         if self.bpp is not None:
             check_range("bpp", self.bpp, (1e-5, 24.0), integer=False)
+        if self.preset is not None:
+            from lfstream.codec.encoder import PRESETS
+
+            check_choice("preset", self.preset, tuple(PRESETS))
         if isinstance(self.alphas, str):
             check_choice("alphas", self.alphas, FOCUS_MODES)
         else:

@@ -117,5 +117,6 @@ def test_fuzz_mutations_never_crash_or_hang(stream):
     from tools.fuzz_bitstream import fuzz
 
     hinted = encode(synth_clip(2, 3, (32, 32), seed=2, vignetting=0.6).lf, depth_hint=True)
-    counts = fuzz([stream, hinted], 300, seed=2024)
+    av1 = encode(synth_clip(2, 3, (32, 32), seed=3).lf, preset="balanced")  # version 2: an AV1 centre view
+    counts = fuzz([stream, hinted, av1], 300, seed=2024)
     assert counts["decoded"] + counts["rejected"] == 300 and counts["rejected"] > 200  # CRCs catch nearly all

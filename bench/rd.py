@@ -1,0 +1,190 @@
+"""Rate-distortion of lfstream against HEVC and AV1 pseudo-sequences, with Bjontegaard deltas.
+
+For every scene (the synthetic clip's first frame and every sample in ../shared/data; the
+HCI "star" scenes as their centre 3x3, the only complete square of views they have):
+
+- lfstream's presets (fast = JPEG, balanced / best = AV1 centre view; all with the depth
+  hint) over a sweep of qualities, and lfstream's rate control (``encode(lf, bpp=T)``, every
+  preset and hint precision considered) at targets T from 0.005 to 0.1 bpp;
+- x265 preset medium and preset ultrafast, and SVT-AV1 (preset 8), each coding the views as
+  one pseudo-sequence (raster order, one key frame) over a sweep of constant QP / CRF.
+
+Per point: bpp, MPSNR, MSSIM, encode and decode seconds (one timed run after the first;
+the same harness and metric code for every method). Per scene: BD-rate on MPSNR and on
+MSSIM and BD-PSNR of every method against x265 medium (piecewise cubic over the
+overlapping range, lfstream.metrics.bd_rate); one PNG with both curves.
+
+    python bench/rd.py [--json [FILE]] [--quick] [--scenes NAME,...] [--png-dir DIR]
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from _harness import ROOT, emit, parser
+
+import lfstream
+from lfstream.codec.baseline import decode_views, encode_views
+from lfstream.errors import LFValueError
+from lfstream.metrics import bd_psnr, bd_rate, bpp, capped, mpsnr, mssim
+from lfstream.synth import synth_clip
+
+os.environ.setdefault("SVT_LOG", "1")
+SHARED = ROOT.parent / "shared" / "data"
+ANCHOR = "x265 medium"
+QUALITIES = (10, 25, 40, 55, 70, 85, 95)
+TARGETS = (0.005, 0.01, 0.02, 0.04, 0.08, 0.1)
+BASELINES = {  # method -> (codec, preset, parameters)
+    "x265 medium": ("hevc", "medium", (22, 27, 32, 37, 42, 47)),
+    "x265 ultrafast": ("hevc", "ultrafast", (22, 27, 32, 37, 42, 47)),
+    "SVT-AV1 p8": ("av1", "8", (20, 30, 40, 50, 60)),
+}
+PRESETS = ("fast", "balanced", "best")
+
+
+def scenes(quick: bool, only: set[str] | None) -> list[tuple[str, np.ndarray]]:
+    size = (128, 160) if quick else (375, 540)
+    out = [("synthetic", synth_clip(1, 7, size, seed=21, noise=2.0, vignetting=0.3, motion=0, camera_pan=0).lf[0])]
+    folders = [("seahorse", "seahorse5x5/camImagesFlat"), ("dino", "hci_star/dino"), ("cotton", "hci_star/cotton"),
+               ("lytro_bikes", "lytro_bikes"), ("lytro_translucent", "lytro_translucent"), ("toys_array", "toys_array")]
+    for name, folder in folders:
+        if not (SHARED / folder).exists() or (quick and name != "seahorse"):
+            continue
+        lf = lfstream.read_lf(SHARED / folder, return_mask=True)[0] if folder.startswith("hci") else lfstream.read_lf(
+            SHARED / folder)
+        if folder.startswith("hci"):
+            lf = lf[3:6, 3:6]  # the star's only complete square
+        out.append((name, lf[:, :, :192, :256] if quick else lf))
+    return [(n, np.ascontiguousarray(lf)) for n, lf in out if only is None or n in only]
+
+
+def _timed(fn):
+    t0 = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t0
+
+
+def _point(lf: np.ndarray, data: bytes, rec: np.ndarray, param, enc_s: float, dec_s: float) -> dict:
+    return {"param": param, "bytes": len(data), "bpp": bpp(len(data), lf.shape), "mpsnr": capped(mpsnr(lf, rec)),
+            "mssim": float(mssim(lf, rec)), "encode_s": enc_s, "decode_s": dec_s}
+
+
+def lfstream_curve(lf: np.ndarray, preset: str, quick: bool) -> list[dict]:
+    pts = []
+    for q in QUALITIES[::2] if quick else QUALITIES:
+        lfstream.encode(lf, quality=q, preset=preset)  # warm (kernels, codec libraries)
+        data, t_enc = _timed(lambda: lfstream.encode(lf, quality=q, preset=preset))
+        rec, t_dec = _timed(lambda: lfstream.decode(data)[0])
+        pts.append(_point(lf, data, rec, q, t_enc, t_dec))
+    return pts
+
+
+def rate_control_curve(lf: np.ndarray, quick: bool) -> list[dict]:
+    from lfstream.codec.bitstream import split_stream
+
+    pts = []
+    for target in TARGETS[1:5] if quick else TARGETS:
+        data, t_enc = _timed(lambda: lfstream.encode(lf, bpp=target))
+        rec, t_dec = _timed(lambda: lfstream.decode(data)[0])
+        header = split_stream(data)[0]
+        p = _point(lf, data, rec, target, t_enc, t_dec)
+        p.update({"target_bpp": target, "preset": header.meta.get("preset", "fast"), "quality": header.quality,
+                  "hint": header.has_hint})
+        pts.append(p)
+    return pts
+
+
+def baseline_curve(lf: np.ndarray, codec: str, preset: str, params) -> list[dict]:
+    pts = []
+    for q in params:
+        data, t_enc = _timed(lambda: encode_views(lf, codec, q, constant_qp=True, preset=preset))
+        rec, t_dec = _timed(lambda: decode_views(data, codec, lf.shape[:2], lf.shape[2:4]))
+        pts.append(_point(lf, data, rec, q, t_enc, t_dec))
+    return pts
+
+
+def bjontegaard(curves: dict[str, list[dict]]) -> dict[str, dict]:
+    """Every method against x265 medium; None (with the reason) where the curves do not overlap."""
+    a = curves[ANCHOR]
+    out = {}
+    for method, b in curves.items():
+        if method == ANCHOR:
+            continue
+        row = {}
+        for key, fn, metric in (("bd_rate_psnr_pct", bd_rate, "mpsnr"), ("bd_rate_ssim_pct", bd_rate, "mssim"),
+                                ("bd_psnr_db", bd_psnr, "mpsnr")):
+            try:
+                row[key] = fn([p["bpp"] for p in a], [p[metric] for p in a], [p["bpp"] for p in b], [p[metric] for p in b])
+            except LFValueError as exc:
+                row[key] = None
+                row.setdefault("why", str(exc))
+        out[method] = row
+    return out
+
+
+def plot(scene: str, curves: dict[str, list[dict]], path: Path) -> None:
+    """MPSNR and MSSIM against log bpp, one line per method, drawn with OpenCV."""
+    w, h, m = 760, 520, 64
+    colours = [(200, 60, 20), (20, 140, 20), (20, 20, 200), (160, 20, 160), (0, 0, 0), (0, 140, 200), (120, 120, 0)]
+    panels = []
+    pts = [p for c in curves.values() for p in c if 0.002 <= p["bpp"] <= 0.2]
+    x0, x1 = np.log10(min(p["bpp"] for p in pts)), np.log10(max(p["bpp"] for p in pts))
+    for metric, label in (("mpsnr", "MPSNR (dB)"), ("mssim", "MSSIM")):
+        img = np.full((h, w, 3), 255, np.uint8)
+        y0, y1 = min(p[metric] for p in pts), max(p[metric] for p in pts)
+        pad = (y1 - y0) * 0.05 + 1e-6
+        y0, y1 = y0 - pad, y1 + pad
+
+        def xy(p, y0=y0, y1=y1, metric=metric):
+            return (int(m + (np.log10(p["bpp"]) - x0) / max(x1 - x0, 1e-9) * (w - 2 * m)),
+                    int(h - m - (p[metric] - y0) / max(y1 - y0, 1e-9) * (h - 2 * m)))
+
+        cv2.rectangle(img, (m, m), (w - m, h - m), (0, 0, 0), 1)
+        for k in range(5):
+            cv2.putText(img, f"{10 ** (x0 + k * (x1 - x0) / 4):.3g}", (m + int(k * (w - 2 * m) / 4) - 18, h - m + 20),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1)
+            fmt = "{:.1f}" if metric == "mpsnr" else "{:.3f}"
+            cv2.putText(img, fmt.format(y0 + k * (y1 - y0) / 4), (4, h - m - int(k * (h - 2 * m) / 4)),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1)
+        cv2.putText(img, f"{scene}: {label} vs bits per pixel (log)", (m, 36), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 1)
+        for k, (method, curve) in enumerate(curves.items()):
+            c = colours[k % len(colours)]
+            sel = sorted((q for q in curve if 0.002 <= q["bpp"] <= 0.2), key=lambda q: q["bpp"])
+            p = [xy(q) for q in sel]
+            for a, b in zip(p, p[1:]):
+                cv2.line(img, a, b, c, 2, cv2.LINE_AA)
+            for q in p:
+                cv2.circle(img, q, 3, c, -1, cv2.LINE_AA)
+            cv2.putText(img, method, (w - m - 190, h - m - 12 - 20 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.5, c, 1, cv2.LINE_AA)
+        panels.append(img)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), np.concatenate(panels, axis=1))
+
+
+def main(argv=None) -> dict:
+    p = parser(__doc__)
+    p.add_argument("--scenes", help="comma-separated scene names (default: all found)")
+    p.add_argument("--png-dir", type=Path, default=ROOT / "bench" / "results")
+    args = p.parse_args(argv)
+    only = set(args.scenes.split(",")) if args.scenes else None
+    results = []
+    for name, lf in scenes(args.quick, only):
+        curves = {f"lfstream {preset}": lfstream_curve(lf, preset, args.quick) for preset in PRESETS}
+        curves["lfstream --bpp (rate control)"] = rate_control_curve(lf, args.quick)
+        for method, (codec, preset, params) in BASELINES.items():
+            curves[method] = baseline_curve(lf, codec, preset, params)
+        bd = bjontegaard(curves)
+        results.append({"scene": name, "shape": list(lf.shape), "curves": curves, "bjontegaard_vs_x265_medium": bd})
+        plot(name, curves, args.png_dir / f"rd_{name}.png")
+        for method, row in bd.items():
+            cells = [f"{k} {v:+7.1f}" if v is not None else f"{k}    n/a" for k, v in row.items() if k != "why"]
+            print(f"{name:18s} {method:30s} " + "  ".join(cells), flush=True)
+    return emit(args, results)
+
+
+if __name__ == "__main__":
+    main()

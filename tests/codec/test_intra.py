@@ -1,0 +1,143 @@
+"""The centre view's coding: JPEG and AV1 key frames, the presets that pick them, and the
+version-2 streams that carry AV1."""
+
+import json
+
+import numpy as np
+import pytest
+
+import lfstream
+from lfstream.cli import main
+from lfstream.codec.bitstream import (
+    CODEC_AV1,
+    CODEC_JPEG,
+    StreamHeader,
+    pack_header,
+    read_header,
+    split_stream,
+)
+from lfstream.codec.encoder import PRESETS
+from lfstream.codec.intra import CentreCoding, av1_crf, decode_av1, encode_av1
+from lfstream.errors import BitstreamError, LFValueError
+from lfstream.metrics import bpp, mpsnr, psnr
+from lfstream.synth import synth_clip
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return synth_clip(1, 5, (96, 128), seed=4, noise=1.0).lf[0]
+
+
+def test_av1_round_trip_is_faithful_deterministic_and_crops_odd_sizes(scene):
+    img = np.ascontiguousarray(scene[2, 2, :95, :127])  # odd sizes: padded, then cropped
+    data = encode_av1(img, 60, speed=12)
+    assert data == encode_av1(img, 60, speed=12)  # same input, same bytes
+    back = decode_av1(data, img.shape[:2])
+    assert back.shape == img.shape and back.dtype == np.uint8
+    assert psnr(img, back) > 33.0  # 4:2:0 of a textured synthetic view at quality 60
+    sizes = [len(encode_av1(img, q)) for q in (10, 50, 90)]
+    assert sizes[0] < sizes[1] < sizes[2]
+
+
+def test_colour_conversion_keeps_chroma_detail():
+    """4:2:0 by 2x2 means and bilinear up-sampling: within 1 dB of JPEG q100's own 4:2:0
+    round trip on a textured synthetic view (OpenCV's I420 conversion lost ~5 dB there)."""
+    from lfstream.codec.intra import _i420_to_rgb, _rgb_to_i420
+    from lfstream.codec.jpeg import jpeg_roundtrip
+
+    img = synth_clip(1, 3, (96, 128), seed=21, noise=2.0).lf[0, 1, 1]
+    back = _i420_to_rgb(_rgb_to_i420(img))
+    assert back.shape == img.shape and back.dtype == np.uint8
+    assert psnr(img, back) >= psnr(img, jpeg_roundtrip(img, 100)) - 1.0
+    grey = np.repeat(img.mean(axis=2, keepdims=True).astype(np.uint8), 3, axis=2)
+    assert np.abs(_i420_to_rgb(_rgb_to_i420(grey)).astype(int) - grey).max() <= 2  # no chroma: exact up to rounding
+
+
+def test_quality_maps_onto_the_whole_crf_range():
+    assert av1_crf(100) == 1 and av1_crf(1) == 63 and 28 <= av1_crf(50) <= 34
+    with pytest.raises(LFValueError):
+        av1_crf(0)
+    with pytest.raises(LFValueError):
+        CentreCoding("png")
+    with pytest.raises(LFValueError):
+        CentreCoding("av1", speed=99)
+
+
+def test_damaged_av1_payload_is_a_bitstream_error(scene):
+    data = encode_av1(scene[2, 2], 50)
+    with pytest.raises(BitstreamError):
+        decode_av1(b"\x00garbage" * 4, scene.shape[2:4], frame=3)
+    with pytest.raises(BitstreamError, match="header says"):
+        decode_av1(data, (scene.shape[2] - 10, scene.shape[3]))
+
+
+def test_presets_stamp_the_lowest_version_and_decode(scene):
+    fast = lfstream.encode(scene)
+    assert fast == lfstream.encode(scene, preset="fast")  # the default is the seed's JPEG, version 1
+    assert fast[4:6] == (1).to_bytes(2, "little")
+    for name in ("balanced", "best"):
+        data = lfstream.encode(scene, preset=name)
+        header, packets = split_stream(data)
+        assert header.version == 2 and header.codec == CODEC_AV1 and header.meta["preset"] == name
+        assert header.meta["centre"]["svt_preset"] == PRESETS[name].speed
+        rec = lfstream.decode(data)[0]
+        assert rec.shape == scene.shape
+        assert mpsnr(scene, rec) > 28.0
+        assert data == lfstream.encode(scene, preset=name)  # deterministic
+
+
+def test_a_version_1_header_cannot_claim_av1_and_unknown_codecs_are_refused():
+    v2 = pack_header(StreamHeader(views=(3, 3), size=(16, 16), codec=CODEC_AV1))
+    assert read_header(__import__("io").BytesIO(v2)).codec == CODEC_AV1
+    forged = bytearray(v2)
+    forged[4:6] = (1).to_bytes(2, "little")  # a version-1 stamp on an AV1 stream (CRC fixed below)
+    import struct
+    import zlib
+
+    body = bytes(forged[:-4])
+    forged[-4:] = struct.pack("<I", zlib.crc32(body))
+    with pytest.raises(BitstreamError, match="not part of version 1"):
+        read_header(__import__("io").BytesIO(bytes(forged)))
+    with pytest.raises(BitstreamError, match="unknown codec"):
+        pack_header(StreamHeader(views=(3, 3), size=(16, 16), codec=9))
+    assert StreamHeader(views=(3, 3), size=(16, 16), codec=CODEC_JPEG).version == 1
+
+
+def test_av1_centre_gives_equal_quality_for_fewer_bytes(scene):
+    """The reason for the balanced preset: some JPEG quality reaches the AV1 stream's MPSNR
+    only with at least 10 % more bytes (synthetic 5x5x96x128, noise 1)."""
+    av1 = lfstream.encode(scene, quality=50, preset="balanced")
+    target = mpsnr(scene, lfstream.decode(av1)[0])
+    fast = [(len(d), mpsnr(scene, lfstream.decode(d)[0])) for d in (lfstream.encode(scene, quality=q) for q in
+                                                                     range(30, 101, 5))]
+    enough = [n for n, m in fast if m >= target]
+    assert enough, "no JPEG quality reaches the AV1 stream's MPSNR"
+    assert min(enough) >= 1.1 * len(av1), (min(enough), len(av1))
+
+
+def test_rate_control_considers_every_preset_and_reproduces_its_stream(scene):
+    from lfstream.codec.hint import HintOptions
+    from lfstream.codec.rate import RATE_TOLERANCE, choose_configuration
+
+    target = 0.1
+    choice = choose_configuration(scene[None], target, 30.0, presets=tuple(PRESETS))
+    assert {c["preset"] for c in choice.candidates} == set(PRESETS)
+    assert {c["hint_scale"] for c in choice.candidates} == {4, 8, None}
+    assert abs(choice.bpp - target) / target <= RATE_TOLERANCE
+    again = lfstream.encode(scene, quality=choice.quality, depth_hint=choice.depth_hint, preset=choice.preset,
+                            hint_options=HintOptions(hint_scale=choice.hint_scale) if choice.hint_scale else None)
+    assert choice.stream() == again
+    assert bpp(len(lfstream.encode(scene, bpp=target)), scene.shape) == pytest.approx(choice.bpp)
+
+
+def test_cli_encode_takes_a_preset(scene, tmp_path, capsys):
+    np.save(tmp_path / "lf.npy", scene)
+    assert main(["encode", str(tmp_path / "lf.npy"), "-o", str(tmp_path / "a.lfs"), "--preset", "balanced", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["preset"] == "balanced"
+    assert split_stream((tmp_path / "a.lfs").read_bytes())[0].codec == CODEC_AV1
+    assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "a.npy")]) == 0
+    assert np.load(tmp_path / "a.npy").shape[-5:] == scene.shape
+    with pytest.raises(SystemExit) as exc:
+        main(["encode", str(tmp_path / "lf.npy"), "-o", str(tmp_path / "b.lfs"), "--preset", "slowest"])
+    assert exc.value.code == 2
