@@ -54,10 +54,10 @@ def scenes(quick: bool, only: set[str] | None) -> list[tuple[str, np.ndarray]]:
     for name, folder in folders:
         if not (SHARED / folder).exists() or (quick and name != "seahorse"):
             continue
-        lf = lfstream.read_lf(SHARED / folder, return_mask=True)[0] if folder.startswith("hci") else lfstream.read_lf(
-            SHARED / folder)
         if folder.startswith("hci"):
-            lf = lf[3:6, 3:6]  # the star's only complete square
+            lf = lfstream.read_lf(SHARED / folder, return_mask=True)[0][3:6, 3:6]  # the star's only complete square
+        else:
+            lf = lfstream.read_lf(SHARED / folder)
         out.append((name, lf[:, :, :192, :256] if quick else lf))
     return [(n, np.ascontiguousarray(lf)) for n, lf in out if only is None or n in only]
 

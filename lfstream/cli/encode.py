@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from lfstream.cli._common import add_read_options, emit, float_in, int_in, load_from_args
-from lfstream.codec.encoder import PRESETS
+from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
 
 HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre view + depth hint)"
@@ -43,14 +43,13 @@ def run(args: argparse.Namespace) -> int:
     loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
     frames = frames_of(loaded.lf)
     fps = args.fps or loaded.fps or 30.0
-    quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or "fast"
+    quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
     if args.bpp is not None:
         from lfstream.codec.rate import choose_configuration
 
         # rate control encodes every frame while it searches: its stream is written as it is
         t0 = time.perf_counter()
-        rate = choose_configuration(frames, args.bpp, fps, loaded.present,
-                                    presets=(args.preset,) if args.preset else tuple(PRESETS))
+        rate = choose_configuration(frames, args.bpp, fps, loaded.present, preset=args.preset)
         quality, depth_hint, preset = rate.quality, rate.depth_hint, rate.preset
         stats = write_stream_file(args.output, rate.header, rate.packets)
         stats.encode_s = time.perf_counter() - t0  # the search included

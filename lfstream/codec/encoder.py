@@ -172,8 +172,7 @@ def encode(
         from lfstream.codec.rate import choose_configuration
 
         # rate control encoded every frame already: its stream is the answer
-        presets = (preset,) if preset is not None else tuple(PRESETS)
-        return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, presets=presets).stream()
+        return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream()
     enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid,
                   preset=preset or DEFAULT_PRESET)
     buf = io.BytesIO()

@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_header, pack_packet
+from lfstream.codec.hint import HintOptions
 from lfstream.codec.intra import CentreCoding, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.errors import LFValueError
@@ -23,12 +24,9 @@ from lfstream.lightfield import centre_view, to_uint8
 
 #: How far from the target a chosen configuration may land (relative), when it can.
 RATE_TOLERANCE = 0.15
-
-
-def _coarse_hint():
-    from lfstream.codec.hint import HintOptions
-
-    return HintOptions(hint_scale=8)
+#: The second hint precision rate control tries (the default sends 1/4 resolution): at low
+#: rates a 1/8 map costs a third of the bytes for 0.1-0.3 dB (measured on the shared samples).
+COARSE_HINT_SCALE = 8
 
 
 @dataclass(frozen=True)
@@ -44,7 +42,7 @@ class RateChoice:
     header: StreamHeader
     packets: tuple[Packet, ...]
     preset: str = "fast"
-    hint_scale: int | None = None
+    hint_options: HintOptions = HintOptions()  # the chosen hint's options (the default without a hint)
 
     def stream(self) -> bytes:
         """The chosen ``.lfs`` stream."""
@@ -88,56 +86,54 @@ def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeade
 
 
 def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, present: np.ndarray | None = None,
-                         hint_options=None, gain_grid: int = 4, presets: tuple[str, ...] = ("fast",)) -> RateChoice:
-    """The (preset, quality, depth hint) whose stream lands nearest ``target_bpp`` with the
-    best first-frame MPSNR (see the module docstring); ``presets``: those to consider.
+                         hint_options: HintOptions | None = None, gain_grid: int = 4,
+                         preset: str | None = None) -> RateChoice:
+    """The (preset, quality, depth hint, hint precision) whose stream lands nearest
+    ``target_bpp`` with the best first-frame MPSNR (see the module docstring). ``preset``:
+    the only preset to consider; ``None`` considers every preset. ``hint_options``: the only
+    hint options to consider; ``None`` tries the default and a 1/8-resolution hint.
 
     Shape:
         - frames: ``(T, U, V, H, W, 3)``
     """
     from lfstream.codec.decoder import decode
-    from lfstream.codec.encoder import Encoder, preset_coding
-    from lfstream.codec.hint import HintOptions
+    from lfstream.codec.encoder import PRESETS, Encoder, preset_coding
     from lfstream.metrics import bpp, mpsnr
 
     if not (np.isfinite(target_bpp) and target_bpp > 0):
         raise LFValueError(f"bpp: a positive target in bits per pixel, got {target_bpp!r}")
-    if not presets:
-        raise LFValueError("presets: at least one")
-    for name in presets:
-        preset_coding(name)
+    if preset is not None:
+        preset_coding(preset)  # an unknown name fails before any encoding
+    presets = tuple(PRESETS) if preset is None else (preset,)
     pixels = int(np.prod(frames.shape[:5]))
     target_bytes = target_bpp * pixels / 8.0
     candidates = []
-    # hint precision is a knob too: at low rates a hint sent at 1/8 resolution costs a third
-    # of the 1/4 one's bytes for 0.1-0.3 dB (measured on the shared samples)
-    variants = [(True, hint_options)] if hint_options is not None else [(True, HintOptions()), (True, _coarse_hint())]
-    for hint, opts in variants + [(False, None)]:
+    hints = [hint_options] if hint_options is not None else [HintOptions(), HintOptions(hint_scale=COARSE_HINT_SCALE)]
+    for hint, opts in [(True, h) for h in hints] + [(False, HintOptions())]:
         # hints and gains do not depend on the preset: one encode per frame, the centre
         # view recoded per preset and quality
-        enc = Encoder(quality=50, depth_hint=hint, hint_options=opts or HintOptions(), gain_grid=gain_grid)
+        enc = Encoder(quality=50, depth_hint=hint, hint_options=opts, gain_grid=gain_grid)
         packets = [enc.encode_frame(f, t, int(round(t * 1e6 / fps)), present) for t, f in enumerate(frames)]
         for name in presets:
-            coding = preset_coding(name)
-            enc_p = Encoder(quality=50, depth_hint=hint, hint_options=enc.hint_options, gain_grid=gain_grid, preset=name)
+            enc_p = Encoder(quality=50, depth_hint=hint, hint_options=opts, gain_grid=gain_grid, preset=name)
             header = enc_p.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
-            q, n, images = _best_quality(frames, packets, header, target_bytes, coding)
-            at_q, moved = _at_quality(header, packets, q, images, coding)
+            q, n, images = _best_quality(frames, packets, header, target_bytes, enc_p.coding)
+            at_q, moved = _at_quality(header, packets, q, images, enc_p.coding)
             first = pack_header(at_q) + pack_packet(moved[0])  # the first frame is a key frame: it decodes alone
             score = float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
             candidates.append({"preset": name, "quality": q, "depth_hint": hint,
-                               "hint_scale": enc.hint_options.hint_scale if hint else None, "bpp": bpp(n, frames.shape),
-                               "mpsnr_first_frame": score, "_stream": (at_q, tuple(moved))})
+                               "hint_scale": opts.hint_scale if hint else None, "bpp": bpp(n, frames.shape),
+                               "mpsnr_first_frame": score, "_stream": (at_q, tuple(moved), opts)})
     # within the tolerance where possible, then the better measured quality
     def rank(c: dict) -> tuple:
         off = abs(c["bpp"] - target_bpp) / target_bpp
         return (off > RATE_TOLERANCE, -c["mpsnr_first_frame"] if off <= RATE_TOLERANCE else off)
 
     best = min(candidates, key=rank)
-    header_q, packets_q = best["_stream"]
+    header_q, packets_q, opts_q = best["_stream"]
     report = tuple({k: v for k, v in c.items() if k != "_stream"} for c in candidates)
     return RateChoice(best["quality"], best["depth_hint"], best["bpp"], best["mpsnr_first_frame"], report, header_q,
-                      packets_q, best["preset"], best["hint_scale"])
+                      packets_q, best["preset"], opts_q)
 
 
-__all__ = ["RATE_TOLERANCE", "RateChoice", "choose_configuration"]
+__all__ = ["RATE_TOLERANCE", "COARSE_HINT_SCALE", "RateChoice", "choose_configuration"]

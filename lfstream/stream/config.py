@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
+from lfstream.codec.encoder import PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.errors import LFValueError
 from lfstream.optics import PlenopticCamera
@@ -80,8 +81,6 @@ class StreamConfig:
         if self.bpp is not None:
             check_range("bpp", self.bpp, (1e-5, 24.0), integer=False)
         if self.preset is not None:
-            from lfstream.codec.encoder import PRESETS
-
             check_choice("preset", self.preset, tuple(PRESETS))
         if isinstance(self.alphas, str):
             check_choice("alphas", self.alphas, FOCUS_MODES)

@@ -19,7 +19,7 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet
 from lfstream.codec.decoder import DecodedFrame, Decoder
-from lfstream.codec.encoder import Encoder
+from lfstream.codec.encoder import DEFAULT_PRESET, Encoder
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.stream.config import StreamConfig
 from lfstream.stream.frames import SourceFrame, StackFrame
@@ -190,7 +190,7 @@ class EncoderStage(ConsumerStage):
                  config: StreamConfig, expect_frames: bool, present: np.ndarray | None = None) -> None:
         super().__init__(control, stats, q_in)
         self.channel, self.config, self.expect_frames, self.present = channel, config, expect_frames, present
-        self.encoder = Encoder(quality=config.quality, depth_hint=config.depth_hint, preset=config.preset or "fast")
+        self.encoder = Encoder(quality=config.quality, depth_hint=config.depth_hint, preset=config.preset or DEFAULT_PRESET)
         self.rate = RateStats()
         self.started = False
 
@@ -198,15 +198,12 @@ class EncoderStage(ConsumerStage):
         lf = item.lf
         if not self.started and self.config.bpp is not None:
             # rate control on the first frame: the quality and hint the whole stream uses
-            from lfstream.codec.encoder import PRESETS
-            from lfstream.codec.hint import HintOptions
             from lfstream.codec.rate import choose_configuration
 
-            presets = (self.config.preset,) if self.config.preset else tuple(PRESETS)
-            choice = choose_configuration(lf[None], self.config.bpp, self.config.fps, self.present, presets=presets)
-            hint_options = HintOptions(hint_scale=choice.hint_scale) if choice.hint_scale else HintOptions()
+            choice = choose_configuration(lf[None], self.config.bpp, self.config.fps, self.present,
+                                          preset=self.config.preset)
             self.encoder = Encoder(quality=choice.quality, depth_hint=choice.depth_hint, preset=choice.preset,
-                                   hint_options=hint_options)
+                                   hint_options=choice.hint_options)
         if not self.started:
             self.channel.send_header(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
             self.started = True
