@@ -20,14 +20,17 @@ Conventions:
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
-import torch.nn.functional as F
 
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import dof_image
+
+if TYPE_CHECKING:
+    import torch
 
 #: Value that aggregate tables use in place of an infinite PSNR.
 PSNR_CAP_DB = 100.0
@@ -37,7 +40,16 @@ _SSIM_WIN = 11
 _K1, _K2 = 0.01, 0.03
 
 
+def _is_tensor(x) -> bool:
+    """Whether ``x`` is a torch tensor, without importing torch: numpy inputs (the stream's
+    metrics) never pay torch's import, and a tensor implies torch is already imported."""
+    torch = sys.modules.get("torch")
+    return torch is not None and isinstance(x, torch.Tensor)
+
+
 def _to_tensor(x: np.ndarray | torch.Tensor) -> torch.Tensor:
+    import torch
+
     if isinstance(x, torch.Tensor):
         return x
     return torch.from_numpy(np.ascontiguousarray(x))
@@ -45,7 +57,7 @@ def _to_tensor(x: np.ndarray | torch.Tensor) -> torch.Tensor:
 
 def _default_range(x: np.ndarray | torch.Tensor) -> float:
     dt = x.dtype
-    if dt in (np.uint8, torch.uint8):
+    if dt == np.uint8 or str(dt) == "torch.uint8":
         return 255.0
     return 1.0
 
@@ -57,6 +69,8 @@ def _pair(
         raise LFShapeError(f"metrics: shapes differ: {tuple(x.shape)} vs {tuple(y.shape)}")
     if x.ndim < 3:
         raise LFShapeError(f"metrics: expected (..., H, W, C), got shape {tuple(x.shape)}")
+    import torch
+
     is_torch = isinstance(x, torch.Tensor)
     rng = float(data_range) if data_range is not None else _default_range(x)
     if not math.isfinite(rng) or rng <= 0:
@@ -116,8 +130,10 @@ def psnr(x, y, data_range: float | None = None):
         - x, y: ``(..., H, W, C)``
         - output: ``(...)``
     """
-    if not isinstance(x, torch.Tensor) and not isinstance(y, torch.Tensor):
+    if not _is_tensor(x) and not _is_tensor(y):
         return _psnr_numpy(np.asarray(x), np.asarray(y), data_range)
+    import torch
+
     tx, ty, rng, is_torch = _pair(x, y, data_range, torch.float64)
     mse = (tx - ty).pow(2).mean(dim=(-3, -2, -1))
     out = 10.0 * torch.log10(rng**2 / mse)  # mse == 0 -> +inf by IEEE division
@@ -149,6 +165,9 @@ def ssim_nchw(a: torch.Tensor, b: torch.Tensor, data_range: float = 1.0, window:
         - a, b: ``(N, C, H, W)`` with ``H, W >= window``
         - output: ``(N, C)``
     """
+    import torch
+    import torch.nn.functional as F
+
     n, c, h, w = a.shape
     g = torch.as_tensor(_gaussian_1d(window), device=a.device, dtype=a.dtype)
     a, b = a / data_range, b / data_range
@@ -174,14 +193,17 @@ def ssim_map_mean(tx: torch.Tensor, ty: torch.Tensor, rng: float) -> torch.Tenso
 def ssim(x, y, data_range: float | None = None):
     """Structural similarity (Wang et al. 2004) per image, averaged over channels.
 
-    Computed in float64 on CPU (scikit-image agreement to ~1e-6) and float32 on GPU.
+    numpy inputs: a fused kernel (float32 moments, float64 sums; within 1e-6 of float64 on
+    8-bit images); torch tensors: float64 on CPU, float32 on GPU.
 
     Shape:
         - x, y: ``(..., H, W, C)`` with ``H, W >= 11``
         - output: ``(...)``
     """
-    if not isinstance(x, torch.Tensor) and not isinstance(y, torch.Tensor):
+    if not _is_tensor(x) and not _is_tensor(y):
         return _ssim_numpy(np.asarray(x), np.asarray(y), data_range)
+    import torch
+
     dev = x.device if isinstance(x, torch.Tensor) else torch.device("cpu")
     dtype = torch.float64 if dev.type == "cpu" else torch.float32
     tx, ty, rng, is_torch = _pair(x, y, data_range, dtype)
@@ -189,32 +211,26 @@ def ssim(x, y, data_range: float | None = None):
 
 
 def _ssim_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
-    """The same SSIM in float64 through OpenCV's separable filter (10x faster than torch's
-    float64 convolution on CPU); the valid region does not depend on the border mode."""
-    import cv2
+    """The same SSIM through a fused numba kernel (:mod:`lfstream._kernels`): float32
+    moments, float64 sums, within 1e-6 of float64 (and of scikit-image) on 8-bit images,
+    3x faster than OpenCV's float64 filters and 10x faster than torch's float64 convolution."""
+    from lfstream._kernels import ssim_images
 
     rng = _numpy_pair(x, y, data_range)
     h, w, c = x.shape[-3:]
     if h < _SSIM_WIN or w < _SSIM_WIN:
         raise LFShapeError(f"ssim: images must be at least {_SSIM_WIN}x{_SSIM_WIN}, got {h}x{w}")
-    g = _gaussian_1d()
-    r = _SSIM_WIN // 2
-    xs, ys = x.reshape(-1, h, w, c), y.reshape(-1, h, w, c)
+
+    def rows(a: np.ndarray) -> np.ndarray:
+        a = a if a.dtype in (np.uint8, np.float32) else a.astype(np.float32)
+        return np.ascontiguousarray(a).reshape(-1, h, w * c)
+
+    xs, ys = rows(x), rows(y)
+    if xs.dtype != ys.dtype:
+        xs, ys = xs.astype(np.float32), ys.astype(np.float32)
     out = np.empty(len(xs), np.float64)
-    for k in range(len(xs)):
-        per_channel = []
-        for ch0 in range(0, c, 4):  # OpenCV filters up to 4 channels per call
-            a = xs[k, :, :, ch0:ch0 + 4].astype(np.float64) / rng
-            b = ys[k, :, :, ch0:ch0 + 4].astype(np.float64) / rng
-
-            def blur(img):
-                f = cv2.sepFilter2D(img, cv2.CV_64F, g, g, borderType=cv2.BORDER_REFLECT)
-                f = f.reshape(h, w, -1)
-                return f[r:h - r, r:w - r]
-
-            s = _ssim_from_moments(blur(a), blur(b), blur(a * a), blur(b * b), blur(a * b))
-            per_channel.extend(s.mean(axis=(0, 1)).tolist())
-        out[k] = float(np.mean(per_channel))
+    ssim_images(xs, ys, c, _gaussian_1d().astype(np.float32), np.float32(1.0 / rng), np.float32(_K1**2),
+                np.float32(_K2**2), out)
     out = out.reshape(x.shape[:-3])
     return float(out) if out.ndim == 0 else out
 
@@ -256,11 +272,13 @@ def _mean_views(per_view, present):
         mask = np.asarray(present, bool)
         if mask.shape != tuple(per_view.shape[-2:]) or not mask.any():
             raise LFShapeError(f"present: expected a (U, V) mask with a True view, got {mask.shape}")
-        if isinstance(per_view, torch.Tensor):
+        if _is_tensor(per_view):
+            import torch
+
             return per_view[..., torch.as_tensor(mask, device=per_view.device)].mean(dim=-1)
         m = np.asarray(per_view, np.float64)[..., mask].mean(axis=-1)
         return float(m) if m.ndim == 0 else m
-    if isinstance(per_view, torch.Tensor):
+    if _is_tensor(per_view):
         return per_view.mean(dim=(-2, -1))
     return _mean_last2(per_view)
 

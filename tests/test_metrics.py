@@ -28,6 +28,19 @@ def test_agrees_with_scikit_image(rng, sigma):
     assert abs(ssim(a / 255.0, b / 255.0) - ref_ssim) < 1e-3
 
 
+@pytest.mark.parametrize("sigma", [1, 20])
+def test_fused_numpy_ssim_agrees_with_float64_torch(rng, sigma):
+    # the numpy path (float32 moments in a numba kernel) against torch's float64 convolution
+    a, b = _noisy_pair(rng, shape=(2, 37, 45, 3), sigma=sigma)
+    fused = ssim(a, b)
+    exact = ssim(torch.from_numpy(a), torch.from_numpy(b)).numpy()
+    assert np.abs(fused - exact).max() < 2e-6
+    assert np.abs(ssim(a.astype(np.float32) / 255, b.astype(np.float64) / 255) - exact).max() < 2e-6
+    # one channel, and a window that exactly fits
+    g1, g2 = a[0, :11, :, :1], b[0, :11, :, :1]
+    assert abs(ssim(g1, g2) - float(ssim(torch.from_numpy(g1), torch.from_numpy(g2)))) < 2e-6
+
+
 def test_on_real_view_pair():
     from lfstream import read_lf
 

@@ -78,7 +78,9 @@ def test_properties_of_metrics_refocus_and_warp(u, v, h, w, seed):
     lf = rng.integers(0, 256, (u, v, h, w, 3), dtype=np.uint8)
     other = rng.integers(0, 256, (u, v, h, w, 3), dtype=np.uint8)
     assert np.all(np.isinf(psnr(lf, lf)))
-    assert np.allclose(psnr(lf, other), psnr(other, lf)) and np.allclose(ssim(lf, other), ssim(other, lf), atol=1e-12)
+    # SSIM's moments are float32 in the fused kernel, whose multiply-adds may fuse in either
+    # order: symmetric to 1e-6
+    assert np.allclose(psnr(lf, other), psnr(other, lf)) and np.allclose(ssim(lf, other), ssim(other, lf), atol=1e-6)
     assert np.isfinite(mpsnr(lf, other)) and -1 <= mssim(lf, other) <= 1
     # SaS at alpha = 1 (slope 0) is the mean of the views (SaS accumulates in float32: 1e-6)
     mean = lf.astype(np.float64).mean(axis=(0, 1)) / 255

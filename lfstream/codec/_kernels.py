@@ -1,7 +1,10 @@
-"""Fused CPU kernels of the decoder's warp, compiled by numba (cached on disk).
+"""Fused CPU kernels of the codec (the encoder's plane sweep, the decoder's hint
+up-sampling and warp), compiled by numba (cached on disk).
 
 The per-view disparity of an occlusion-aware warp needs forward splatting with a z-test
-and hole filling: per-pixel control flow that array operations cannot express.
+and hole filling: per-pixel control flow that array operations cannot express. The warp
+does splatting, hole filling, bilinear sampling and the shading gains of a view in one
+pass, one view per thread, with nothing per view materialised beyond the splatted map.
 """
 
 from __future__ import annotations
@@ -12,88 +15,280 @@ import numpy as np
 _PARALLEL = dict(parallel=True, fastmath=True, cache=True, nogil=True)
 _HOLE = np.float32(-3.0e38)  # marks view pixels no centre pixel lands on
 _HOLE_TEST = np.float32(-1.0e38)
-
-
-@numba.njit(**_PARALLEL)
-def view_sample_maps(disp, n_u, n_v, occlusion, maps):  # pragma: no cover - compiled
-    """Where each view pixel samples the centre view: maps[u, v, y, x] = (x_src, y_src).
-
-    The view (u, v) pixel (y, x) samples the centre at (y + d*du, x + d*dv) with d its own
-    disparity. With ``occlusion``, d is the centre map forward-splatted into the view
-    (nearest pixel, z-test: nearer wins); disoccluded pixels (no centre pixel lands there)
-    copy the sampling position of the nearest valid pixel on the background side of their
-    row (the neighbour with the smaller disparity), which extends the background instead of
-    the occluder. Without it, d is the centre map at the view pixel.
-
-    Args:
-        disp: (H, W) float32 centre-view disparity.
-        maps: (U, V, H, W, 2) float32, overwritten (x first, as cv2.remap wants).
-    """
-    h, w = disp.shape
-    u0, v0 = n_u // 2, n_v // 2
-    for k in numba.prange(n_u * n_v):
-        u = k // n_v
-        v = k % n_v
-        du = np.float32(u - u0)
-        dv = np.float32(v - v0)
-        m = maps[u, v]
-        if not occlusion or (u == u0 and v == v0):
-            for y in range(h):
-                for x in range(w):
-                    d = disp[y, x]
-                    m[y, x, 0] = x + d * dv
-                    m[y, x, 1] = y + d * du
-            continue
-        # a finite sentinel, not -inf: fastmath lets LLVM assume no infinities
-        dview = np.full((h, w), _HOLE, np.float32)
-        for y in range(h):
-            for x in range(w):
-                d = disp[y, x]
-                iy = int(np.floor(y - d * du + 0.5))
-                ix = int(np.floor(x - d * dv + 0.5))
-                if 0 <= iy < h and 0 <= ix < w and d > dview[iy, ix]:
-                    dview[iy, ix] = d
-        for y in range(h):
-            row = dview[y]
-            for x in range(w):
-                d = row[x]
-                if d > _HOLE_TEST:
-                    m[y, x, 0] = x + d * dv
-                    m[y, x, 1] = y + d * du
-            x = 0
-            while x < w:
-                if row[x] > _HOLE_TEST:
-                    x += 1
-                    continue
-                start = x
-                while x < w and row[x] <= _HOLE_TEST:
-                    x += 1
-                left = start - 1
-                right = x
-                if left < 0 and right >= w:
-                    for xx in range(start, x):  # a whole row unseen: fall back to the centre map
-                        d = disp[y, xx]
-                        m[y, xx, 0] = xx + d * dv
-                        m[y, xx, 1] = y + d * du
-                    continue
-                if left < 0:
-                    src = right
-                elif right >= w:
-                    src = left
-                else:
-                    src = left if row[left] <= row[right] else right
-                for xx in range(start, x):
-                    m[y, xx, 0] = m[y, src, 0]
-                    m[y, xx, 1] = m[y, src, 1]
-
-
-# The parallel kernels below run one row per prange iteration and do the row's work in a
-# plain njit function (one place for the row's scalars, the same code at any thread count).
+# The parallel kernels run one row (or view) per prange iteration and do the row's work in
+# plain njit functions (one place for the row's scalars, the same code at any thread count).
 # Indices derived from uint8 data are computed in signed int32: a difference of unsigned
 # values wraps and, without bounds checks, reads far outside a lookup table (a bug found
 # here: joint_upsample gave different maps from run to run). tests/codec checks the
 # kernels against plain-Python references and across thread counts.
 _ROW = dict(fastmath=True, cache=True, nogil=True)
+
+
+# Fixed-point bilinear sampling: positions in 1/1024 pixel (OpenCV 5's remap interpolates
+# in float; 1/32 pixel, as older releases did, was measurably coarser on sharp edges).
+# Up to three channels are sampled at once in 21-bit lanes of one uint64: one load and one
+# multiply per tap instead of three. The horizontal pass leaves 1024 * value (18 bits) per
+# lane, rounded to 8 * value (11 bits) so that the vertical pass's 1024 * 8 * value still
+# fits 21 bits; the result carries 13 fractional bits (:data:`_SCALE_BITS`).
+_FRAC_BITS = 10
+_FRAC = 1 << _FRAC_BITS
+_MID_SHIFT = 7
+_SCALE_BITS = 2 * _FRAC_BITS - _MID_SHIFT
+_LANE = 21
+_LANE_MASK = (1 << _LANE) - 1
+_MID_MASK = (1 << (_LANE - _MID_SHIFT)) - 1
+_LANES = 3
+# positions in 1/1024 pixel from -64 pixels on (anything further left reads the border)
+_TAP_OFFSET = 64 * _FRAC
+
+
+@numba.njit(fastmath=True, cache=True, nogil=True, inline="always")
+def _bilinear_lanes(packed, i00, i01, i10, i11, fx, fy):  # pragma: no cover - compiled
+    """Bilinear interpolation of packed lanes: each lane holds ``2**_SCALE_BITS * value``."""
+    f = np.uint64(_FRAC)
+    r = np.uint64((1 << (_MID_SHIFT - 1)) * (1 | (1 << _LANE) | (1 << (2 * _LANE))))
+    m = np.uint64(_MID_MASK | (_MID_MASK << _LANE) | (_MID_MASK << (2 * _LANE)))
+    top = (((f - fx) * packed[i00] + fx * packed[i01] + r) >> np.uint64(_MID_SHIFT)) & m
+    bottom = (((f - fx) * packed[i10] + fx * packed[i11] + r) >> np.uint64(_MID_SHIFT)) & m
+    return (f - fy) * top + fy * bottom
+
+
+@numba.njit(**_ROW)
+def _floor_int(t, offset):  # pragma: no cover - compiled
+    """floor(t) as the truncation of a positive float32 (vectorises; a libm floor call or a
+    correction for negatives does not); exact while ``offset + t`` keeps the fractional bits
+    that matter (offset 1024: 1/8192 of a unit), clamped to ``[1 - offset, 1e9]`` so that a
+    huge disparity cannot overflow the conversion (callers clamp or bound-check the result)."""
+    return np.int32(min(max(t, np.float32(1.0) - offset), np.float32(1.0e9)) + offset) - np.int32(offset)
+
+
+@numba.njit(**_ROW)
+def pack_lanes(img, ch0, n_ch, packed):  # pragma: no cover - compiled
+    """packed[y * W + x] = channels ch0 .. ch0 + n_ch - 1 of img[y, x] in 21-bit lanes.
+
+    Args:
+        img: (H, W, C) uint8; packed: (H * W,) uint64, overwritten.
+    """
+    h, w, _ = img.shape
+    for y in range(h):
+        for x in range(w):
+            p = np.uint64(0)
+            for j in range(n_ch):
+                p |= np.uint64(img[y, x, ch0 + j]) << np.uint64(_LANE * j)
+            packed[y * w + x] = p
+
+
+@numba.njit(**_ROW)
+def _splat_view(disp, du, dv, dview):  # pragma: no cover - compiled
+    """Forward-splats the centre disparity into view (du, dv): nearest pixel, nearer wins."""
+    h, w = disp.shape
+    flat = dview.ravel()
+    for i in range(h * w):
+        flat[i] = _HOLE
+    for y in range(h):
+        row = disp[y]
+        for x in range(w):
+            d = row[x]
+            iy = _floor_int(np.float32(y) - d * du + np.float32(0.5), np.float32(1024.0))
+            ix = _floor_int(np.float32(x) - d * dv + np.float32(0.5), np.float32(1024.0))
+            if np.uint32(iy) < np.uint32(h) and np.uint32(ix) < np.uint32(w):
+                j = iy * w + ix
+                if d > flat[j]:
+                    flat[j] = d
+
+
+@numba.njit(**_ROW)
+def _row_disparity(disp_row, dview_row, splatted, src_x, d_row):  # pragma: no cover - compiled
+    """One view row's disparity and the column each pixel takes its sampling position from.
+
+    Splatted pixels use their own; a disoccluded run copies the position of the nearest
+    splatted pixel on its background side (the smaller disparity), so the background is
+    extended, not the occluder; a row nothing landed on falls back to the centre map.
+    """
+    w = disp_row.shape[0]
+    if not splatted:
+        for x in range(w):
+            d_row[x] = disp_row[x]
+            src_x[x] = x
+        return
+    x = 0
+    while x < w:
+        if dview_row[x] > _HOLE_TEST:
+            d_row[x] = dview_row[x]
+            src_x[x] = x
+            x += 1
+            continue
+        start = x
+        while x < w and dview_row[x] <= _HOLE_TEST:
+            x += 1
+        left, right = start - 1, x
+        if left < 0 and right >= w:
+            for xx in range(start, x):
+                d_row[xx] = disp_row[xx]
+                src_x[xx] = xx
+            continue
+        if left < 0:
+            src = right
+        elif right >= w:
+            src = left
+        else:
+            src = left if dview_row[left] <= dview_row[right] else right
+        for xx in range(start, x):
+            d_row[xx] = dview_row[src]
+            src_x[xx] = src
+
+
+@numba.njit(**_ROW)
+def _row_taps(d_row, src_x, y, du, dv, h, i00, i01, i10, i11, fxs, fys):  # pragma: no cover - compiled
+    """Flat indices of the four bilinear taps and the 1/1024-pixel fractions of one view row."""
+    w = d_row.shape[0]
+    for x in range(w):
+        d = d_row[x]
+        ix = _floor_int((np.float32(src_x[x]) + d * dv) * np.float32(_FRAC) + np.float32(0.5), np.float32(_TAP_OFFSET))
+        iy = _floor_int((np.float32(y) + d * du) * np.float32(_FRAC) + np.float32(0.5), np.float32(_TAP_OFFSET))
+        fxs[x] = ix & (_FRAC - 1)
+        fys[x] = iy & (_FRAC - 1)
+        x0 = ix >> _FRAC_BITS
+        y0 = iy >> _FRAC_BITS
+        xa = min(max(x0, 0), w - 1)
+        xb = min(max(x0 + 1, 0), w - 1)
+        ya = min(max(y0, 0), h - 1) * w
+        yb = min(max(y0 + 1, 0), h - 1) * w
+        i00[x] = ya + xa
+        i01[x] = ya + xb
+        i10[x] = yb + xa
+        i11[x] = yb + xb
+
+
+@numba.njit(**_ROW)
+def _row_sample3(packed, i00, i01, i10, i11, fxs, fys, dst):  # pragma: no cover - compiled
+    """Bilinear samples of one view row of three channels, rounded to uint8."""
+    half = np.uint64((1 << (_SCALE_BITS - 1)) * (1 | (1 << _LANE) | (1 << (2 * _LANE))))
+    m = np.uint64(255)
+    for x in range(i00.shape[0]):
+        acc = _bilinear_lanes(packed, np.uint32(i00[x]), np.uint32(i01[x]), np.uint32(i10[x]), np.uint32(i11[x]),
+                              np.uint64(fxs[x]), np.uint64(fys[x]))
+        acc = (acc + half) >> np.uint64(_SCALE_BITS)
+        dst[3 * x] = np.uint8(acc & m)
+        dst[3 * x + 1] = np.uint8((acc >> np.uint64(_LANE)) & m)
+        dst[3 * x + 2] = np.uint8((acc >> np.uint64(2 * _LANE)) & m)
+
+
+@numba.njit(**_ROW)
+def _row_sample(packed, i00, i01, i10, i11, fxs, fys, c, ch0, n_ch, dst):  # pragma: no cover - compiled
+    """Bilinear samples of one view row (any channel layout), rounded to uint8."""
+    half = np.uint64((1 << (_SCALE_BITS - 1)) * (1 | (1 << _LANE) | (1 << (2 * _LANE))))
+    m = np.uint64(255)
+    for x in range(i00.shape[0]):
+        acc = _bilinear_lanes(packed, np.uint32(i00[x]), np.uint32(i01[x]), np.uint32(i10[x]), np.uint32(i11[x]),
+                              np.uint64(fxs[x]), np.uint64(fys[x]))
+        acc = (acc + half) >> np.uint64(_SCALE_BITS)
+        for j in range(n_ch):
+            dst[x * c + ch0 + j] = np.uint8((acc >> np.uint64(_LANE * j)) & m)
+
+
+@numba.njit(**_ROW)
+def _row_sample_gain(packed, i00, i01, i10, i11, fxs, fys, c, ch0, n_ch, top, bottom, wa, dst):  # pragma: no cover
+    """Bilinear samples of one view row times the gain ``wa * top + (1 - wa) * bottom``
+    (two gain rows, (W * n_ch,), that include the fixed-point scale), rounded and
+    saturated to uint8."""
+    m = np.uint64(_LANE_MASK)
+    wb = np.float32(1.0) - wa
+    for x in range(i00.shape[0]):
+        acc = _bilinear_lanes(packed, np.uint32(i00[x]), np.uint32(i01[x]), np.uint32(i10[x]), np.uint32(i11[x]),
+                              np.uint64(fxs[x]), np.uint64(fys[x]))
+        for j in range(n_ch):
+            # via int32: an unsigned 64-bit to float conversion is a long instruction sequence
+            lane = np.float32(np.int32((acc >> np.uint64(_LANE * j)) & m))
+            gain = top[x * n_ch + j] * wa + bottom[x * n_ch + j] * wb
+            dst[x * c + ch0 + j] = min(np.int32(lane * gain + np.float32(0.5)), 255)
+
+
+@numba.njit(**_ROW)
+def _row_sample3_gain(packed, i00, i01, i10, i11, fxs, fys, top, bottom, wa, dst):  # pragma: no cover
+    """:func:`_row_sample_gain` for three channels, unrolled."""
+    m = np.uint64(_LANE_MASK)
+    wb = np.float32(1.0) - wa
+    half = np.float32(0.5)
+    for x in range(i00.shape[0]):
+        acc = _bilinear_lanes(packed, np.uint32(i00[x]), np.uint32(i01[x]), np.uint32(i10[x]), np.uint32(i11[x]),
+                              np.uint64(fxs[x]), np.uint64(fys[x]))
+        r = np.float32(np.int32(acc & m))
+        g = np.float32(np.int32((acc >> np.uint64(_LANE)) & m))
+        b = np.float32(np.int32((acc >> np.uint64(2 * _LANE)) & m))
+        k = 3 * x
+        dst[k] = min(np.int32(r * (top[k] * wa + bottom[k] * wb) + half), 255)
+        dst[k + 1] = min(np.int32(g * (top[k + 1] * wa + bottom[k + 1] * wb) + half), 255)
+        dst[k + 2] = min(np.int32(b * (top[k + 2] * wa + bottom[k + 2] * wb) + half), 255)
+
+
+@numba.njit(**_PARALLEL)
+def warp_all_views(packed, channels, ch0, n_ch, disp, n_u, n_v, occlusion, gains, g_rows, g_row_w, g_cols,
+                   g_col_w, out):  # pragma: no cover - compiled
+    """Every view of a light field from its centre view and disparity, in one parallel pass.
+
+    View (u, v) pixel (y, x) samples the centre at ``(y + d * du, x + d * dv)`` (bilinear,
+    1/1024-pixel fixed point, border replicated), where ``d`` is the centre
+    map forward-splatted into the view with a z-test, holes filled from the background side
+    (``occlusion``), or the centre map at the view pixel; the sample is multiplied by the
+    view's gain map, bilinearly up-sampled (OpenCV's INTER_LINEAR resize), and rounded.
+
+    Args:
+        packed: (H * W,) uint64 centre view, channels ch0 .. ch0 + n_ch - 1 in lanes
+            (:func:`pack_lanes`).
+        channels: C of the output; ch0, n_ch: the channels this call writes (n_ch <= 3).
+        disp: (H, W) float32 centre-view disparity.
+        gains: (U, V, gh, gw, Cg) float32 gain maps (Cg = 1 or C), or shape (0, 0, 1, 1, 1): none.
+        g_rows, g_row_w: (H, 2) int64 grid rows per image row and the weight of the first.
+        g_cols, g_col_w: (W, 2) and (W,) the same per column.
+        out: (U, V, H, W*C) uint8; channels ch0 .. ch0 + n_ch - 1 are overwritten.
+    """
+    h, w = disp.shape
+    u0, v0 = n_u // 2, n_v // 2
+    has_gains = gains.shape[0] > 0
+    cg = gains.shape[4]
+    for k in numba.prange(n_u * n_v):
+        u = k // n_v
+        v = k % n_v
+        du = np.float32(u - u0)
+        dv = np.float32(v - v0)
+        splatted = occlusion and not (u == u0 and v == v0)
+        dview = np.empty((h, w), np.float32)
+        if splatted:
+            _splat_view(disp, du, dv, dview)
+        d_row = np.empty(w, np.float32)
+        src_x = np.empty(w, np.int32)
+        i00 = np.empty(w, np.int32)
+        i01 = np.empty(w, np.int32)
+        i10 = np.empty(w, np.int32)
+        i11 = np.empty(w, np.int32)
+        fxs = np.empty(w, np.int32)
+        fys = np.empty(w, np.int32)
+        # the gain map up-sampled along x once per view (gh rows); each image row then
+        # blends two of them
+        gh = gains.shape[2] if has_gains else 1
+        gcols = np.ones((gh, w * n_ch), np.float32)
+        if has_gains:
+            scale = np.float32(1.0 / (1 << _SCALE_BITS))
+            for r in range(gh):
+                for x in range(w):
+                    ca, cb, wx = g_cols[x, 0], g_cols[x, 1], g_col_w[x]
+                    for j in range(n_ch):
+                        cc = ch0 + j if cg > 1 else 0
+                        gcols[r, x * n_ch + j] = (gains[u, v, r, ca, cc] * wx + gains[u, v, r, cb, cc] * (1 - wx)) * scale
+        for y in range(h):
+            _row_disparity(disp[y], dview[y], splatted, src_x, d_row)
+            _row_taps(d_row, src_x, y, du, dv, h, i00, i01, i10, i11, fxs, fys)
+            if has_gains and channels == 3:
+                _row_sample3_gain(packed, i00, i01, i10, i11, fxs, fys, gcols[g_rows[y, 0]], gcols[g_rows[y, 1]],
+                                  g_row_w[y], out[u, v, y])
+            elif has_gains:
+                _row_sample_gain(packed, i00, i01, i10, i11, fxs, fys, channels, ch0, n_ch, gcols[g_rows[y, 0]],
+                                 gcols[g_rows[y, 1]], g_row_w[y], out[u, v, y])
+            elif channels == 3:
+                _row_sample3(packed, i00, i01, i10, i11, fxs, fys, out[u, v, y])
+            else:
+                _row_sample(packed, i00, i01, i10, i11, fxs, fys, channels, ch0, n_ch, out[u, v, y])
 
 
 @numba.njit(**_ROW)

@@ -143,13 +143,18 @@ class Decoder:
         self._last_disparity = d
         return d
 
+    def _gains(self, packet: Packet) -> np.ndarray | None:
+        return decode_gains(packet.gain, self.header.views, packet.seq) if packet.gain else None
+
     def _warp(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray) -> DecodedFrame:
-        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion)
-        return self._finish(packet, centre, disparity, lf)
+        # the warp kernel multiplies the gains in as it samples (no second pass over the views)
+        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion, gains=self._gains(packet))
+        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity)
 
     def _finish(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray, lf: np.ndarray) -> DecodedFrame:
-        if packet.gain:
-            lf = apply_gains(lf, decode_gains(packet.gain, self.header.views, packet.seq))
+        gains = self._gains(packet)
+        if gains is not None:
+            lf = apply_gains(lf, gains)
         return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity)
 
     def decode_batch(self, packets: list[Packet], centres: np.ndarray | None = None) -> list[DecodedFrame]:

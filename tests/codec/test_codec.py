@@ -56,7 +56,9 @@ def test_torch_warp_matches_kernel_without_occlusion(rng, device):
     t = warp_views_torch(torch.from_numpy(centre).permute(2, 0, 1)[None].to(device),
                          torch.from_numpy(d)[None, None].to(device), (3, 3))
     got = t[0].permute(0, 1, 3, 4, 2).cpu().numpy()
-    assert np.abs(got - ref).max() <= 1 / 255 + 1e-5
+    # the kernel quantises the float centre to 8 bits (0.5 level) and its output (0.5
+    # level); its fixed-point interpolation adds under 0.1 level
+    assert np.abs(got - ref).max() <= 1.1 / 255
 
 
 def test_depth_hint_accuracy_on_synthetic_truth():
