@@ -37,21 +37,24 @@ MAX_VIEWS_PER_AXIS = 64
 MAX_VIEW_SIDE = 16384
 
 
-def _is_tensor(x: object) -> bool:
-    # torch is imported only by the code that runs networks; an object can be a tensor only
-    # once torch has been imported, so this test never imports it (fast start-up).
-    torch = sys.modules.get("torch")
-    return torch is not None and isinstance(x, torch.Tensor)
+def is_tensor(x: object) -> bool:
+    """Whether ``x`` is a torch tensor, without importing torch.
+
+    torch is imported only by the code that runs networks; an object can be a tensor only
+    once torch has been imported (fast start-up). A torch still being imported by another
+    thread has no ``Tensor`` yet, and then nothing is one."""
+    tensor = getattr(sys.modules.get("torch"), "Tensor", None)
+    return tensor is not None and isinstance(x, tensor)
 
 
 def _permute(x: ArrayT, axes: tuple[int, ...]) -> ArrayT:
-    if _is_tensor(x):
+    if is_tensor(x):
         return x.permute(*axes)
     return np.transpose(x, axes)
 
 
 def _is_array(x: object) -> bool:
-    return isinstance(x, np.ndarray) or _is_tensor(x)
+    return isinstance(x, np.ndarray) or is_tensor(x)
 
 
 def check_lf(lf: object, name: str = "lf", allow_video: bool = True) -> tuple[int, ...]:
@@ -139,7 +142,7 @@ def downsample_angular(lf: ArrayT, factor: int = 2) -> ArrayT:
     x = lf[..., : nu * factor, : nv * factor, :, :, :]
     x = x.reshape(*lead, nu, factor, nv, factor, h, w, c)
     nl = len(lead)
-    if _is_tensor(x):
+    if is_tensor(x):
         xf = x if x.is_floating_point() else x.float()
         if not x.is_floating_point():
             xf = xf / 255.0
@@ -270,13 +273,13 @@ def dof_image(lf: ArrayT, weights: np.ndarray | torch.Tensor | None = None) -> A
         - output: ``(*, H, W, C)``
     """
     u, v, *_ = lf_dims(lf)
-    is_torch = _is_tensor(lf)
+    is_torch = is_tensor(lf)
     x = as_float(lf)
     if weights is None:
         if is_torch:
             return x.mean(dim=(-5, -4))
         return x.mean(axis=(-5, -4))
-    wt = np.asarray(weights.detach().cpu() if _is_tensor(weights) else weights, np.float32)
+    wt = np.asarray(weights.detach().cpu() if is_tensor(weights) else weights, np.float32)
     if tuple(wt.shape) != (u, v):
         raise LFShapeError(f"weights: expected shape ({u}, {v}), got {tuple(wt.shape)}")
     total = float(wt.sum())
@@ -293,7 +296,7 @@ def dof_image(lf: ArrayT, weights: np.ndarray | torch.Tensor | None = None) -> A
 def as_float(x: ArrayT) -> ArrayT:
     """uint8 -> float32 in ``[0, 1]``; float inputs are returned as float32 (torch keeps its
     float dtype), other integer types are rejected."""
-    if _is_tensor(x):
+    if is_tensor(x):
         if x.dtype == sys.modules["torch"].uint8:
             return x.float() / 255.0
         if x.is_floating_point():
@@ -322,7 +325,7 @@ def to_network_input(x: np.ndarray | torch.Tensor, device: str | torch.device = 
 
 def to_uint8(x: ArrayT) -> ArrayT:
     """Float in ``[0, 1]`` -> uint8 with rounding and clipping; NaN maps to 0."""
-    if _is_tensor(x):
+    if is_tensor(x):
         torch = sys.modules["torch"]
         if x.dtype == torch.uint8:
             return x
@@ -339,7 +342,7 @@ def check_finite(x: ArrayT, name: str = "lf") -> None:
     lfstream rejects non-finite input instead of sanitising it: a NaN in a light field is
     a bug upstream, and silently replacing it would hide that bug.
     """
-    if _is_tensor(x):
+    if is_tensor(x):
         if x.is_floating_point() and not bool(sys.modules["torch"].isfinite(x).all()):
             raise LFValueError(f"{name}: contains NaN or Inf values")
     elif np.issubdtype(np.asarray(x).dtype, np.floating) and not np.isfinite(x).all():

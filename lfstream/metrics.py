@@ -20,14 +20,13 @@ Conventions:
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from lfstream.errors import LFShapeError, LFValueError
-from lfstream.lightfield import dof_image
+from lfstream.lightfield import dof_image, is_tensor
 
 if TYPE_CHECKING:
     import torch
@@ -38,13 +37,6 @@ PSNR_CAP_DB = 100.0
 _SSIM_SIGMA = 1.5
 _SSIM_WIN = 11
 _K1, _K2 = 0.01, 0.03
-
-
-def _is_tensor(x) -> bool:
-    """Whether ``x`` is a torch tensor, without importing torch: numpy inputs (the stream's
-    metrics) never pay torch's import, and a tensor implies torch is already imported."""
-    torch = sys.modules.get("torch")
-    return torch is not None and isinstance(x, torch.Tensor)
 
 
 def _to_tensor(x: np.ndarray | torch.Tensor) -> torch.Tensor:
@@ -130,7 +122,7 @@ def psnr(x, y, data_range: float | None = None):
         - x, y: ``(..., H, W, C)``
         - output: ``(...)``
     """
-    if not _is_tensor(x) and not _is_tensor(y):
+    if not is_tensor(x) and not is_tensor(y):
         return _psnr_numpy(np.asarray(x), np.asarray(y), data_range)
     import torch
 
@@ -200,7 +192,7 @@ def ssim(x, y, data_range: float | None = None):
         - x, y: ``(..., H, W, C)`` with ``H, W >= 11``
         - output: ``(...)``
     """
-    if not _is_tensor(x) and not _is_tensor(y):
+    if not is_tensor(x) and not is_tensor(y):
         return _ssim_numpy(np.asarray(x), np.asarray(y), data_range)
     import torch
 
@@ -272,13 +264,13 @@ def _mean_views(per_view, present):
         mask = np.asarray(present, bool)
         if mask.shape != tuple(per_view.shape[-2:]) or not mask.any():
             raise LFShapeError(f"present: expected a (U, V) mask with a True view, got {mask.shape}")
-        if _is_tensor(per_view):
+        if is_tensor(per_view):
             import torch
 
             return per_view[..., torch.as_tensor(mask, device=per_view.device)].mean(dim=-1)
         m = np.asarray(per_view, np.float64)[..., mask].mean(axis=-1)
         return float(m) if m.ndim == 0 else m
-    if _is_tensor(per_view):
+    if is_tensor(per_view):
         return per_view.mean(dim=(-2, -1))
     return _mean_last2(per_view)
 

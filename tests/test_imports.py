@@ -27,6 +27,17 @@ def test_light_imports_do_not_load_torch_or_numba(code):
     assert _heavy_modules_after(code) == []
 
 
+def test_a_default_stream_runs_without_torch():
+    # the stream's decoder, refocus (shift-and-sum) and metrics need no network: torch's
+    # import (about a second) must not land inside a timed run
+    code = ("from lfstream.stream import Pipeline, StreamConfig\n"
+            "from lfstream.synth import synth_clip\n"
+            "clip = synth_clip(2, 3, (24, 32), seed=1)\n"
+            "s = Pipeline(iter(clip.lf), StreamConfig(), None).run()\n"
+            "assert s['frames'] == 2 and s['warmup_s'] > 0, s")
+    assert "torch" not in _heavy_modules_after(code)
+
+
 # Lower layers first. A module may import (at module level) only its own package, lower
 # packages and the foundation modules; lazy imports inside functions are not counted.
 LAYERS = ["errors", "lightfield", "optics", "metrics", "synth", "io", "codec", "models", "refocus", "viewer", "stream",

@@ -37,8 +37,9 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-skip-static", action="store_true", help="always recompute the disparity")
     p.add_argument("--skip-planes", action="store_true",
                    help="render focal planes outside the scene's disparity range by a cheap path")
-    p.add_argument("--mssim-every", type=int_in((0, 1 << 30)), default=10,
-                   help="MSSIM on every N-th frame (0: never; MPSNR on all)")
+    p.add_argument("--mssim-every", type=int_in((0, 1 << 30)), default=StreamConfig.mssim_every,
+                   help="MSSIM on every N-th frame, from frame 0 (default: once a second of 30 fps video; 0: "
+                        "never; MPSNR on all); the summary lists the frames in mssim_frames")
     p.add_argument("--queue-size", type=int_in(QUEUE_RANGE), default=4)
     p.add_argument("--no-viewer", action="store_true", help="do not write index.html (click-to-focus page)")
     p.add_argument("--progress", action="store_true", help="a status line on stderr (default when it is a terminal)")

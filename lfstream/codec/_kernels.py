@@ -92,7 +92,7 @@ def _splat_view(disp, du, dv, dview):  # pragma: no cover - compiled
             iy = _floor_int(np.float32(y) - d * du + np.float32(0.5), np.float32(1024.0))
             ix = _floor_int(np.float32(x) - d * dv + np.float32(0.5), np.float32(1024.0))
             if np.uint32(iy) < np.uint32(h) and np.uint32(ix) < np.uint32(w):
-                j = iy * w + ix
+                j = np.uint32(iy * w + ix)
                 if d > flat[j]:
                     flat[j] = d
 
@@ -139,12 +139,14 @@ def _row_disparity(disp_row, dview_row, splatted, src_x, d_row):  # pragma: no c
 
 
 @numba.njit(**_ROW)
-def _row_taps(d_row, src_x, y, du, dv, h, i00, i01, i10, i11, fxs, fys):  # pragma: no cover - compiled
-    """Flat indices of the four bilinear taps and the 1/1024-pixel fractions of one view row."""
+def _row_taps(d_row, src_x, identity, y, du, dv, h, i00, i01, i10, i11, fxs, fys):  # pragma: no cover - compiled
+    """Flat indices of the four bilinear taps and the 1/1024-pixel fractions of one view row;
+    pixel x samples from column ``src_x[x]``, or from x itself when ``identity``."""
     w = d_row.shape[0]
     for x in range(w):
         d = d_row[x]
-        ix = _floor_int((np.float32(src_x[x]) + d * dv) * np.float32(_FRAC) + np.float32(0.5), np.float32(_TAP_OFFSET))
+        sx = np.float32(x) if identity else np.float32(src_x[x])
+        ix = _floor_int((sx + d * dv) * np.float32(_FRAC) + np.float32(0.5), np.float32(_TAP_OFFSET))
         iy = _floor_int((np.float32(y) + d * du) * np.float32(_FRAC) + np.float32(0.5), np.float32(_TAP_OFFSET))
         fxs[x] = ix & (_FRAC - 1)
         fys[x] = iy & (_FRAC - 1)
@@ -169,9 +171,10 @@ def _row_sample3(packed, i00, i01, i10, i11, fxs, fys, dst):  # pragma: no cover
         acc = _bilinear_lanes(packed, np.uint32(i00[x]), np.uint32(i01[x]), np.uint32(i10[x]), np.uint32(i11[x]),
                               np.uint64(fxs[x]), np.uint64(fys[x]))
         acc = (acc + half) >> np.uint64(_SCALE_BITS)
-        dst[3 * x] = np.uint8(acc & m)
-        dst[3 * x + 1] = np.uint8((acc >> np.uint64(_LANE)) & m)
-        dst[3 * x + 2] = np.uint8((acc >> np.uint64(2 * _LANE)) & m)
+        k = np.uint32(3 * x)  # unsigned: no negative-index check in the loop
+        dst[k] = np.uint8(acc & m)
+        dst[k + np.uint32(1)] = np.uint8((acc >> np.uint64(_LANE)) & m)
+        dst[k + np.uint32(2)] = np.uint8((acc >> np.uint64(2 * _LANE)) & m)
 
 
 @numba.njit(**_ROW)
@@ -216,15 +219,17 @@ def _row_sample3_gain(packed, i00, i01, i10, i11, fxs, fys, top, bottom, wa, dst
         r = np.float32(np.int32(acc & m))
         g = np.float32(np.int32((acc >> np.uint64(_LANE)) & m))
         b = np.float32(np.int32((acc >> np.uint64(2 * _LANE)) & m))
-        k = 3 * x
+        k = np.uint32(3 * x)
+        k1 = k + np.uint32(1)
+        k2 = k + np.uint32(2)
         dst[k] = min(np.int32(r * (top[k] * wa + bottom[k] * wb) + half), 255)
-        dst[k + 1] = min(np.int32(g * (top[k + 1] * wa + bottom[k + 1] * wb) + half), 255)
-        dst[k + 2] = min(np.int32(b * (top[k + 2] * wa + bottom[k + 2] * wb) + half), 255)
+        dst[k1] = min(np.int32(g * (top[k1] * wa + bottom[k1] * wb) + half), 255)
+        dst[k2] = min(np.int32(b * (top[k2] * wa + bottom[k2] * wb) + half), 255)
 
 
 @numba.njit(**_PARALLEL)
 def warp_all_views(packed, channels, ch0, n_ch, disp, n_u, n_v, occlusion, gains, g_rows, g_row_w, g_cols,
-                   g_col_w, out):  # pragma: no cover - compiled
+                   g_col_w, chunks, out):  # pragma: no cover - compiled
     """Every view of a light field from its centre view and disparity, in one parallel pass.
 
     View (u, v) pixel (y, x) samples the centre at ``(y + d * du, x + d * dv)`` (bilinear,
@@ -241,21 +246,18 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, n_u, n_v, occlusion, gains
         gains: (U, V, gh, gw, Cg) float32 gain maps (Cg = 1 or C), or shape (0, 0, 1, 1, 1): none.
         g_rows, g_row_w: (H, 2) int64 grid rows per image row and the weight of the first.
         g_cols, g_col_w: (W, 2) and (W,) the same per column.
+        chunks: parallel tasks (the thread count).
         out: (U, V, H, W*C) uint8; channels ch0 .. ch0 + n_ch - 1 are overwritten.
     """
     h, w = disp.shape
-    u0, v0 = n_u // 2, n_v // 2
     has_gains = gains.shape[0] > 0
-    cg = gains.shape[4]
-    for k in numba.prange(n_u * n_v):
-        u = k // n_v
-        v = k % n_v
-        du = np.float32(u - u0)
-        dv = np.float32(v - v0)
-        splatted = occlusion and not (u == u0 and v == v0)
+    n_views = n_u * n_v
+    chunks = max(1, min(chunks, n_views))
+    # one task per thread, views dealt round-robin: the scratch maps are allocated once per
+    # task (an 800 KB allocation per view was mmap'ed and page-faulted afresh: measured
+    # 15 % of a stream's CPU in the kernel zeroing pages)
+    for task in numba.prange(chunks):
         dview = np.empty((h, w), np.float32)
-        if splatted:
-            _splat_view(disp, du, dv, dview)
         d_row = np.empty(w, np.float32)
         src_x = np.empty(w, np.int32)
         i00 = np.empty(w, np.int32)
@@ -264,31 +266,53 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, n_u, n_v, occlusion, gains
         i11 = np.empty(w, np.int32)
         fxs = np.empty(w, np.int32)
         fys = np.empty(w, np.int32)
-        # the gain map up-sampled along x once per view (gh rows); each image row then
-        # blends two of them
         gh = gains.shape[2] if has_gains else 1
         gcols = np.ones((gh, w * n_ch), np.float32)
-        if has_gains:
-            scale = np.float32(1.0 / (1 << _SCALE_BITS))
-            for r in range(gh):
-                for x in range(w):
-                    ca, cb, wx = g_cols[x, 0], g_cols[x, 1], g_col_w[x]
-                    for j in range(n_ch):
-                        cc = ch0 + j if cg > 1 else 0
-                        gcols[r, x * n_ch + j] = (gains[u, v, r, ca, cc] * wx + gains[u, v, r, cb, cc] * (1 - wx)) * scale
-        for y in range(h):
-            _row_disparity(disp[y], dview[y], splatted, src_x, d_row)
-            _row_taps(d_row, src_x, y, du, dv, h, i00, i01, i10, i11, fxs, fys)
-            if has_gains and channels == 3:
-                _row_sample3_gain(packed, i00, i01, i10, i11, fxs, fys, gcols[g_rows[y, 0]], gcols[g_rows[y, 1]],
-                                  g_row_w[y], out[u, v, y])
-            elif has_gains:
-                _row_sample_gain(packed, i00, i01, i10, i11, fxs, fys, channels, ch0, n_ch, gcols[g_rows[y, 0]],
-                                 gcols[g_rows[y, 1]], g_row_w[y], out[u, v, y])
-            elif channels == 3:
-                _row_sample3(packed, i00, i01, i10, i11, fxs, fys, out[u, v, y])
-            else:
-                _row_sample(packed, i00, i01, i10, i11, fxs, fys, channels, ch0, n_ch, out[u, v, y])
+        for k in range(task, n_views, chunks):
+            _warp_view(packed, channels, ch0, n_ch, disp, n_u, n_v, k // n_v, k % n_v, occlusion, gains, g_rows,
+                       g_row_w, g_cols, g_col_w, dview, d_row, src_x, i00, i01, i10, i11, fxs, fys, gcols, out)
+
+
+@numba.njit(**_ROW)
+def _warp_view(packed, channels, ch0, n_ch, disp, n_u, n_v, u, v, occlusion, gains, g_rows, g_row_w, g_cols, g_col_w,
+               dview, d_row, src_x, i00, i01, i10, i11, fxs, fys, gcols, out):  # pragma: no cover - compiled
+    """One view of :func:`warp_all_views`, in the caller's scratch buffers."""
+    h, w = disp.shape
+    has_gains = gains.shape[0] > 0
+    cg = gains.shape[4]
+    du = np.float32(u - n_u // 2)
+    dv = np.float32(v - n_v // 2)
+    splatted = occlusion and not (u == n_u // 2 and v == n_v // 2)
+    if splatted:
+        _splat_view(disp, du, dv, dview)
+    # the gain map up-sampled along x once per view (gh rows); each image row then
+    # blends two of them
+    gh = gcols.shape[0]
+    if has_gains:
+        scale = np.float32(1.0 / (1 << _SCALE_BITS))
+        for r in range(gh):
+            for x in range(w):
+                ca, cb, wx = g_cols[x, 0], g_cols[x, 1], g_col_w[x]
+                for j in range(n_ch):
+                    cc = ch0 + j if cg > 1 else 0
+                    gcols[r, x * n_ch + j] = (gains[u, v, r, ca, cc] * wx + gains[u, v, r, cb, cc] * (1 - wx)) * scale
+    for y in range(h):
+        row = dview[y] if splatted else disp[y]
+        if splatted and np.min(row) <= _HOLE_TEST:  # a disoccluded run in this row: fill it
+            _row_disparity(disp[y], row, True, src_x, d_row)
+            _row_taps(d_row, src_x, False, y, du, dv, h, i00, i01, i10, i11, fxs, fys)
+        else:  # every pixel has its own disparity (most rows): no copy, no scan
+            _row_taps(row, src_x, True, y, du, dv, h, i00, i01, i10, i11, fxs, fys)
+        if has_gains and channels == 3:
+            _row_sample3_gain(packed, i00, i01, i10, i11, fxs, fys, gcols[g_rows[y, 0]], gcols[g_rows[y, 1]],
+                              g_row_w[y], out[u, v, y])
+        elif has_gains:
+            _row_sample_gain(packed, i00, i01, i10, i11, fxs, fys, channels, ch0, n_ch, gcols[g_rows[y, 0]],
+                             gcols[g_rows[y, 1]], g_row_w[y], out[u, v, y])
+        elif channels == 3:
+            _row_sample3(packed, i00, i01, i10, i11, fxs, fys, out[u, v, y])
+        else:
+            _row_sample(packed, i00, i01, i10, i11, fxs, fys, channels, ch0, n_ch, out[u, v, y])
 
 
 @numba.njit(**_ROW)

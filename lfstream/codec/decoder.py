@@ -78,17 +78,21 @@ class Decoder:
         self.device = check_device(self.device)
         if self.depth == "hint" and not self.header.has_hint:
             raise LFValueError("depth='hint': this stream carries no depth hint (encode with depth_hint=True)")
-        from lfstream.models.registry import load_model
-
         # JPEG-Hance is trained on JPEG artefacts: "auto" never runs it on an AV1 centre view
         use_hance = self.hance == "on" or (self.hance == "auto" and self.header.codec == CODEC_JPEG
                                            and self.header.quality <= HANCE_MAX_QUALITY.get(self.preset, 0))
-        self._hance = load_model("jpeg_hance", self.preset, self.device) if use_hance else None
+        self._hance = None
+        if use_hance:  # torch is imported only when a network runs
+            from lfstream.models.registry import load_model
+
+            self._hance = load_model("jpeg_hance", self.preset, self.device)
         self._hints = HintDecoder()
         self._last_disparity: np.ndarray | None = None
         self.hint_fallbacks = 0  # delta hints whose reference frame never arrived
         self._depth_net = None
         if self.depth == "net":
+            from lfstream.models.registry import load_model
+
             self._depth_net = load_model("depth_net", self.preset, self.device)
             if self._depth_net.config.hint and not self.header.has_hint:
                 raise LFValueError("depth='net': the shipped Depth-Net refines the encoder's depth hint and this "

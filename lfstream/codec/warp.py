@@ -73,6 +73,8 @@ def warp_views(
             gains = None
     if not np.any(d) and gains is None:
         return np.ascontiguousarray(np.broadcast_to(src, (u, v, h, w, c)))
+    import numba
+
     from lfstream.codec._kernels import pack_lanes, warp_all_views
 
     if gains is None:
@@ -88,7 +90,8 @@ def warp_views(
     for ch0 in range(0, c, 3):  # three channels per pass, in the lanes of one uint64
         n_ch = min(3, c - ch0)
         pack_lanes(src, ch0, n_ch, packed)
-        warp_all_views(packed, c, ch0, n_ch, d, u, v, bool(occlusion), gains, rows, row_w, cols, col_w, out)
+        warp_all_views(packed, c, ch0, n_ch, d, u, v, bool(occlusion), gains, rows, row_w, cols, col_w,
+                       numba.get_num_threads(), out)
     return out.reshape(u, v, h, w, c)
 
 

@@ -106,13 +106,16 @@ class VideoWriter:
     """
 
     def __init__(self, path: str | os.PathLike, fps: float = 30.0, lossless: bool = True, crf: int = 18,
-                 metadata: dict[str, str] | None = None, preset: str = "medium") -> None:
+                 metadata: dict[str, str] | None = None, preset: str = "medium", threads: int | None = None) -> None:
         self.path = Path(path)
         ext = self.path.suffix.lower()
         if ext not in VIDEO_EXTS + (".gif",):
             raise LFValueError(f"{self.path}: unsupported video extension; use one of {VIDEO_EXTS + ('.gif',)}")
         self._ext, self._fps, self._lossless, self._crf = ext, fps, lossless, crf
         self._metadata, self._preset = metadata or {}, preset
+        # encoder threads (None: the codec's own choice); a caller running many writers in one
+        # thread gives each one thread rather than multiplying x264's frame threads
+        self._threads = threads
         self._container = None
         self._stream = None
         self._size: tuple[int, int] | None = None
@@ -134,6 +137,8 @@ class VideoWriter:
             # (readers crop it back, see iter_video_frames)
             pix_fmt = "yuv420p"
             codec, options = "libx264", {"crf": str(self._crf), "preset": self._preset}
+        if self._threads is not None and codec != "gif":
+            options = {**options, "threads": str(int(self._threads))}
         ph, pw = (h + h % 2, w + w % 2) if pix_fmt == "yuv420p" else (h, w)
         metadata = dict(self._metadata)
         if (ph, pw) != (h, w):

@@ -11,7 +11,6 @@ the network; a missing or corrupt file raises :class:`lfstream.WeightsError`.
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 import os
 from dataclasses import asdict, dataclass, fields, is_dataclass
@@ -24,9 +23,8 @@ from torch import nn
 from lfstream.errors import LFValueError, WeightsError
 from lfstream.io._fs import atomic_path, atomic_write_text
 from lfstream.models.layers import count_params
+from lfstream.models.manifest import MANIFEST, WEIGHTS_DIR, manifest_entry, read_manifest, sha256_file  # noqa: F401
 
-WEIGHTS_DIR = Path(__file__).with_name("weights")
-MANIFEST = WEIGHTS_DIR / "manifest.json"
 PRESETS = ("paper", "fast")
 
 
@@ -91,30 +89,6 @@ def config_from_dict(config_cls: type, data: dict) -> Any:
     if unknown:
         raise WeightsError(f"weights config has unknown fields {sorted(unknown)} for {config_cls.__name__}")
     return config_cls(**{k: _tuples(v) for k, v in data.items()})
-
-
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def read_manifest() -> dict:
-    if not MANIFEST.exists():
-        return {"models": []}
-    try:
-        return json.loads(MANIFEST.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise WeightsError(f"{MANIFEST}: unreadable weights manifest ({exc})") from exc
-
-
-def manifest_entry(name: str, preset: str) -> dict | None:
-    for entry in read_manifest().get("models", []):
-        if entry.get("name") == name and entry.get("preset") == preset:
-            return entry
-    return None
 
 
 def load_model(name: str, preset: str = "fast", device: str | torch.device = "cpu",

@@ -4,8 +4,9 @@ Why numba (the one dependency beyond the brief's list): shift-and-sum refocusing
 per-pixel loop with an integer offset and four fixed weights per view. Torch executes one
 operation at a time, so each tap of each view is a full pass over memory: measured on the
 2-core development machine, a 16-plane 7x7x375x540 stack takes 0.47 s with separable,
-in-place torch ops and 0.10 s with this fused loop, which reads each source row from cache
-once per plane. Kernels compile on first use (a few seconds) and are cached on disk.
+in-place torch ops and 0.10 s with a fused loop that reads each source row from cache once
+per plane; the separable fused loop here does 13 planes in 52 ms (37 ms writing uint8).
+Kernels compile on first use (a few seconds) and are cached on disk.
 """
 
 from __future__ import annotations
@@ -55,9 +56,32 @@ def _add_shifted_row(acc, src, a, b, o0, channels):  # pragma: no cover - compil
             _axpy1(acc[lo1:hi1], src[lo1 + o1 : hi1 + o1], b)
 
 
+@numba.njit(fastmath=True, cache=True, nogil=True)
+def _view_row_sum(lf, channels, weights, u, r, x_int, x_frac, k, dst):  # pragma: no cover - compiled
+    """dst = sum_v w_uv * (x-bilinear of row r of view (u, v) at the k-th plane's shift)."""
+    dst[:] = 0.0
+    for v in range(lf.shape[1]):
+        wv = weights[u, v]
+        if wv == 0.0:
+            continue
+        fx = x_frac[k, v]
+        _add_shifted_row(dst, lf[u, v, r], np.float32(wv * (1.0 - fx)), np.float32(wv * fx),
+                         x_int[k, v] * channels, channels)
+
+
 @numba.njit(**_PARALLEL)
-def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, col_cover, scale, out):  # pragma: no cover - compiled
+def shift_sum_separable(lf, channels, weights, y_int, y_frac, x_int, x_frac, col_cover, scale, to_uint8, bands,
+                        out):  # pragma: no cover - compiled
     """Weighted, coverage-normalised, bilinear shift-and-sum of views; zero outside each view.
+
+    ``out[k, y] = sum_uv w_uv * bilinear(lf[u, v], y + y_int + y_frac, x + x_int + x_frac) /
+    (scale * coverage)``, 0 where nothing covers the pixel, computed separably: for each
+    plane and view row ``u`` the x-shifted sum over that row's views
+    ``H_ku(r) = sum_v w_uv * L_uv(r, x + x_int + x_frac)`` once per source row ``r``, then the
+    y-bilinear of the two ``H_ku`` rows each output row needs. An output row's second tap
+    row is the next output row's first, so each ``H_ku`` row is computed once per band of
+    rows: 2UV + 2U multiply-adds per sample instead of 4UV (measured 13 planes of
+    7x7x375x540: 82 -> 52 ms, 37 ms writing uint8).
 
     Args:
         lf: (U, V, H, W*C) uint8 or float32, rows flattened channels-last so a shift by one
@@ -68,36 +92,51 @@ def shift_sum_rows(lf, channels, weights, y_int, y_frac, x_int, x_frac, col_cove
         col_cover: (K, U, W) float32, ``sum_v w_uv * (x-tap weight of view v inside the image)``;
             with the y taps it gives each pixel's coverage, the weight that really contributed.
         scale: value range of ``lf`` (255 for uint8), divided out.
-        out: (K, H, W*C) float32, overwritten with
-            ``sum_uv w_uv * bilinear(lf[u, v], y + y_int + y_frac, x + x_int + x_frac) / (scale * coverage)``
-            and 0 where nothing covers the pixel.
+        to_uint8: write ``round(value * 255 / scale)`` into a uint8 ``out`` (for uint8 input),
+            else the float value in ``[0, 1]``.
+        bands: row bands, one per parallel task (each computes one extra ``H`` row per plane
+            and view row at its start).
+        out: (K, H, W*C) float32 or uint8, overwritten.
     """
-    n_u, n_v, h, _ = lf.shape
+    n_u, n_v, h, wc = lf.shape
     n_k, n_w = col_cover.shape[0], col_cover.shape[2]
-    for y in numba.prange(h):
+    per = (h + bands - 1) // bands
+    for band in numba.prange(bands):
+        y0 = band * per
+        y1 = min(h, y0 + per)
+        if y0 >= y1:
+            continue
+        # rows[r % 2, k, u] holds H_ku of source row r: the row under this output row's
+        # first tap is the next output row's first tap
+        rows = np.empty((2, n_k, n_u, wc), np.float32)
+        acc = np.empty(wc, np.float32)
         cover = np.empty(n_w, np.float32)
-        for k in range(n_k):
-            acc = out[k, y]
-            acc[:] = 0.0
-            cover[:] = 0.0
-            for u in range(n_u):
-                fy = y_frac[k, u]
-                for tap in range(2):
-                    wy = (1.0 - fy) if tap == 0 else fy
-                    sy = y + y_int[k, u] + tap
-                    if wy == 0.0 or sy < 0 or sy >= h:
-                        continue
-                    _axpy1(cover, col_cover[k, u], np.float32(wy))
-                    for v in range(n_v):
-                        wv = weights[u, v] * wy
-                        if wv == 0.0:
-                            continue
-                        fx = x_frac[k, v]
-                        _add_shifted_row(
-                            acc, lf[u, v, sy], np.float32(wv * (1.0 - fx)), np.float32(wv * fx),
-                            x_int[k, v] * channels, channels,
-                        )
-            for x in range(n_w):
-                f = np.float32(1.0 / (scale * cover[x])) if cover[x] > 1e-6 else np.float32(0.0)
-                for ch in range(channels):
-                    acc[x * channels + ch] *= f
+        for y in range(y0, y1):
+            for k in range(n_k):
+                acc[:] = 0.0
+                cover[:] = 0.0
+                for u in range(n_u):
+                    r = y + y_int[k, u]
+                    if y == y0 and 0 <= r < h:
+                        _view_row_sum(lf, channels, weights, u, r, x_int, x_frac, k, rows[r % 2, k, u])
+                    if 0 <= r + 1 < h:
+                        _view_row_sum(lf, channels, weights, u, r + 1, x_int, x_frac, k, rows[(r + 1) % 2, k, u])
+                    fy = y_frac[k, u]
+                    if fy != 1.0 and 0 <= r < h:
+                        _axpy1(acc, rows[r % 2, k, u], np.float32(1.0 - fy))
+                        _axpy1(cover, col_cover[k, u], np.float32(1.0 - fy))
+                    if fy != 0.0 and 0 <= r + 1 < h:
+                        _axpy1(acc, rows[(r + 1) % 2, k, u], np.float32(fy))
+                        _axpy1(cover, col_cover[k, u], np.float32(fy))
+                dst = out[k, y]
+                for x in range(n_w):
+                    if cover[x] > 1e-6:
+                        f = np.float32(255.0 / (scale * cover[x])) if to_uint8 else np.float32(1.0 / (scale * cover[x]))
+                    else:
+                        f = np.float32(0.0)
+                    for ch in range(channels):
+                        val = acc[x * channels + ch] * f
+                        if to_uint8:
+                            dst[x * channels + ch] = min(max(np.int32(val + np.float32(0.5)), 0), 255)
+                        else:
+                            dst[x * channels + ch] = val

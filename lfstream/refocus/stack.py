@@ -4,16 +4,18 @@ all-in-focus image."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from lfstream.errors import LFShapeError, LFValueError
-from lfstream.lightfield import aperture_weights, check_finite, check_lf, to_network_input
+from lfstream.lightfield import aperture_weights, check_finite, check_lf, is_tensor, to_network_input
 from lfstream.optics import SEED_ALPHAS, slopes_from_alphas
-from lfstream.refocus.fourier import fourier_slice
 from lfstream.refocus.planes import resolve_slopes, slope_range
 from lfstream.refocus.shift_sum import shift_and_sum
+
+if TYPE_CHECKING:
+    import torch
 
 METHODS = ("sas", "fourier", "refnet")
 
@@ -59,8 +61,13 @@ def focal_stack(
     if method == "sas":
         if method_options:
             raise LFValueError(f"options {sorted(method_options)} apply to method='fourier' only")
-        out = shift_and_sum(lf, s, weights, present)
+        # uint8 in, uint8 out: the kernel rounds as it writes (no float stack to convert)
+        out = shift_and_sum(lf, s, weights, present, uint8_out=True)
+        if str(out.dtype) in ("uint8", "torch.uint8"):
+            return out
     elif method == "fourier":
+        from lfstream.refocus.fourier import fourier_slice  # torch's FFT
+
         out = fourier_slice(lf, s, weights, present, **method_options)
     elif method == "refnet":
         if weights is not None or present is not None:
@@ -81,6 +88,8 @@ def refnet_stack(lf, slopes: np.ndarray, device: str | None = None, preset: str 
     seed = slopes_from_alphas(SEED_ALPHAS)
     if np.shape(slopes) != np.shape(seed) or not np.allclose(slopes, seed, atol=1e-6):
         raise LFValueError("method='refnet' renders the seed's sixteen alphas (0.125 ... 2.0) only")
+    import torch
+
     is_torch = isinstance(lf, torch.Tensor)
     dev = device or (str(lf.device) if is_torch else "cpu")
     from lfstream.models.registry import shipped_model
@@ -102,7 +111,9 @@ def refnet_stack(lf, slopes: np.ndarray, device: str | None = None, preset: str 
 
 
 def _to_input_range(out, like):
-    if isinstance(out, torch.Tensor):
+    if is_tensor(out):
+        import torch
+
         if like.dtype == torch.uint8:
             return (out * 255.0 + 0.5).clamp_(0, 255).to(torch.uint8)
         return out.clamp(0, 1).to(like.dtype) if like.dtype != out.dtype else out.clamp(0, 1)
@@ -145,28 +156,9 @@ def all_in_focus(
     return _to_input_range(img, lf)
 
 
-class FocalStack(torch.nn.Module):
-    """``nn.Module`` wrapper of :func:`focal_stack` with fixed planes and method.
-
-    Shape:
-        - input: ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)`` tensor
-        - output: ``(K, H, W, 3)`` or ``(T, K, H, W, 3)``
-    """
-
-    def __init__(self, alphas: Sequence[float] | None = None, method: str = "sas", slopes=None, **options):
-        super().__init__()
-        self.slopes = resolve_slopes(alphas, slopes)
-        self.method = method
-        self.options = options
-
-    def forward(self, lf: torch.Tensor) -> torch.Tensor:
-        return focal_stack(lf, method=self.method, slopes=self.slopes, **self.options)
-
-
 __all__ = [
     "METHODS",
     "focal_stack",
     "refnet_stack",
     "all_in_focus",
-    "FocalStack",
 ]

@@ -72,7 +72,7 @@ class Refocuser:
         return plane_records(self.slopes, self.config.camera)
 
     def _refnet_applicable(self) -> bool:
-        from lfstream.models.registry import manifest_entry
+        from lfstream.models.manifest import manifest_entry
 
         entry = manifest_entry("refnet", "fast")
         seed = slopes_from_alphas(SEED_ALPHAS)
@@ -124,7 +124,7 @@ class Refocuser:
         import torch
 
         from lfstream import __version__
-        from lfstream.models.registry import manifest_entry
+        from lfstream.models.manifest import manifest_entry
 
         entry = manifest_entry("refnet", "fast") or {}
         return "|".join(str(x) for x in (self.config.device, lf.shape, np.round(self.slopes, 6).tolist(), __version__,

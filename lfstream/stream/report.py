@@ -84,7 +84,7 @@ class QualityStats:
     stack_psnr: dict[int, float] = field(default_factory=dict)
 
 
-def build_summary(*, wall_s: float, frames: int, stages: dict[str, StageStats], rate: RateStats,
+def build_summary(*, wall_s: float, warmup_s: float = 0.0, frames: int, stages: dict[str, StageStats], rate: RateStats,
                   quality: QualityStats, static: StaticSkipStats, planes: PlaneSkipStats,
                   receive: dict | None, transport: str, refocus: dict | None, hance: dict,
                   interrupted: bool, outputs: list[str], focal_planes: list[dict] | None = None,
@@ -94,6 +94,8 @@ def build_summary(*, wall_s: float, frames: int, stages: dict[str, StageStats], 
         "frames": frames,
         "fps": round(frames / wall_s, 3) if wall_s > 0 else None,
         "wall_s": round(wall_s, 3),
+        # loading the compiled kernels before the clock started (lfstream.stream.warmup)
+        "warmup_s": round(warmup_s, 3),
         "bpp": (rate.bytes * 8 / rate.pixels) if rate.pixels else None,
         "bytes": rate.bytes,
         "mpsnr": float(np.mean([p for _, p in quality.mpsnr])) if quality.mpsnr else None,

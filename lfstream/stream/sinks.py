@@ -58,9 +58,12 @@ class Sink:
             if "mp4" in cfg.save or "mp4-lossless" in cfg.save:
                 if not self._plane_writers:
                     lossless = "mp4-lossless" in cfg.save
+                    # one encoder thread per plane: this stage feeds a dozen writers in turn,
+                    # and x264's own frame threads per writer only oversubscribe the cores
+                    # (measured 13 planes of 375 x 540: 78 -> 61 ms per frame)
                     self._plane_writers = [
                         VideoWriter(self.out / f"plane_{k:02d}.mp4", cfg.fps, lossless=lossless, crf=18, preset="veryfast",
-                                    metadata={"comment": plane_label(k, s)})
+                                    metadata={"comment": plane_label(k, s)}, threads=1)
                         for k, s in enumerate(self._plane_log[-1]["slopes"] or [None] * len(f.stack))]
                 for w, img in zip(self._plane_writers, f.stack):
                     w.write(img)
