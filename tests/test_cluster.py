@@ -10,6 +10,7 @@ import pytest
 import lfstream
 from lfstream.cli import main
 from lfstream.cluster import EncodeOptions, batch
+from lfstream.errors import LFValueError
 from lfstream.synth import synth_clip
 
 HAS_RAY = importlib.util.find_spec("ray") is not None
@@ -64,6 +65,18 @@ def test_decode_mode_reassembles_frames_in_order(videos, tmp_path):
     dec = batch([lfs], tmp_path / "dec", mode="decode", group_frames=2)
     assert dec.ok and dec.files[0].frames == 7
     assert np.array_equal(np.load(dec.files[0].output), lfstream.decode(open(lfs, "rb").read()))
+
+
+def test_batch_encode_with_an_av1_preset_equals_a_single_encode(videos, tmp_path):
+    paths, _ = videos
+    rep = batch([paths[0]], tmp_path / "av1", group_frames=100, encode=EncodeOptions(quality=60, preset="balanced"))
+    assert rep.ok
+    data = open(rep.files[0].output, "rb").read()
+    lf = np.load(paths[0])
+    # one group: the same bytes as encoding the video in one call with the same options
+    assert data == lfstream.encode(lf, quality=60, preset="balanced")
+    with pytest.raises(LFValueError):
+        EncodeOptions(preset="slowest")
 
 
 @needs_ray

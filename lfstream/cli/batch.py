@@ -8,6 +8,7 @@ from pathlib import Path
 
 from lfstream.cli._common import add_read_options, emit, int_in, read_options
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
+from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
 
 HELP = "encode or decode a collection of LF videos, in this process or on a Ray cluster"
@@ -27,7 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int_in((1, 4096)), help="CPUs of the local Ray cluster (default: all)")
     p.add_argument("--group", type=int_in((1, 1 << 20)), default=8, help="frames per job (default 8)")
     p.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="encode: JPEG quality of the centre view")
-    p.add_argument("--no-depth-hint", action="store_true", help="encode: send only the JPEG centre view")
+    p.add_argument("--no-depth-hint", action="store_true", help="encode: send only the centre view")
+    p.add_argument("--preset", choices=tuple(PRESETS), default=DEFAULT_PRESET,
+                   help="encode: centre-view coding, fast (JPEG), balanced or best (AV1)")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto", help="decode: disparity source")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto", help="decode: JPEG-Hance")
     p.add_argument("--device", default="cpu", help="decode: where the networks run")
@@ -51,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
     report = batch(args.inputs, args.output, mode=args.mode, engine=args.engine, address=args.address,
                    workers=args.workers, group_frames=args.group,
-                   encode=EncodeOptions(quality=args.quality, depth_hint=not args.no_depth_hint),
+                   encode=EncodeOptions(quality=args.quality, depth_hint=not args.no_depth_hint, preset=args.preset),
                    decode=DecodeOptions(depth=args.depth, hance=args.hance, device=args.device),
                    read=read_options(args), output_format=args.format, overwrite=args.overwrite)
     emit(args, report.as_dict(), _text)

@@ -17,6 +17,7 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_packet, read_header, read_packet
 from lfstream.codec.hint import KIND_FULL
+from lfstream.errors import LFValueError
 
 
 @dataclass(frozen=True)
@@ -25,6 +26,20 @@ class EncodeOptions:
 
     quality: int = 50
     depth_hint: bool = True
+    # the centre view's coding (lfstream.codec.encoder.PRESETS): fast = JPEG, balanced / best = AV1
+    preset: str = "fast"
+
+    def __post_init__(self) -> None:
+        from lfstream.codec.encoder import PRESETS
+
+        if self.preset not in PRESETS:
+            raise LFValueError(f"preset: one of {', '.join(PRESETS)}, got {self.preset!r}")
+
+    def encoder(self):
+        """A fresh :class:`~lfstream.codec.encoder.Encoder` with these options."""
+        from lfstream.codec.encoder import Encoder
+
+        return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset)
 
 
 @dataclass(frozen=True)
@@ -52,10 +67,8 @@ def encode_group(frames: np.ndarray, start: int, fps: float, options: EncodeOpti
     is a key frame); returns the packets packed, in order."""
     import time
 
-    from lfstream.codec.encoder import Encoder
-
     t0 = time.perf_counter()
-    enc = Encoder(quality=options.quality, depth_hint=options.depth_hint)
+    enc = options.encoder()
     packets = [pack_packet(enc.encode_frame(f, start + k, int(round((start + k) * 1e6 / fps)), present))
                for k, f in enumerate(frames)]
     return GroupResult(start, packets=packets, seconds=time.perf_counter() - t0)

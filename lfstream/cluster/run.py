@@ -232,10 +232,8 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
         try:
             if mode == "encode":
                 from lfstream.codec.bitstream import pack_header
-                from lfstream.codec.encoder import Encoder
 
-                header = Encoder(quality=encode.quality, depth_hint=encode.depth_hint).header(
-                    plan["views"], plan["size"], plan["fps"])
+                header = encode.encoder().header(plan["views"], plan["size"], plan["fps"])
                 with atomic_open(plan["target"]) as fh:
                     fh.write(pack_header(header))
                     for part in parts:

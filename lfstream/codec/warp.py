@@ -71,8 +71,13 @@ def warp_views(
             raise LFShapeError(f"gains: expected ({u}, {v}, gh, gw, 1 or {c}), got {gains.shape}")
         if np.all(np.abs(gains - 1.0) < 1e-6):
             gains = None
-    if not np.any(d) and gains is None:
-        return np.ascontiguousarray(np.broadcast_to(src, (u, v, h, w, c)))
+    if not np.any(d):  # every view is the centre view: copies, then OpenCV's gain multiply
+        flat = np.ascontiguousarray(np.broadcast_to(src, (u, v, h, w, c)))
+        if gains is None:
+            return flat
+        from lfstream.codec.shading import apply_gains
+
+        return apply_gains(flat, gains)
     import numba
 
     from lfstream.codec._kernels import pack_lanes, warp_all_views

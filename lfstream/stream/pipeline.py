@@ -17,10 +17,12 @@ Skips (each switchable, each reported in the summary with what it saved and cost
       rendered by a cheap path (shift-and-sum at half resolution, upsampled) and flagged;
   (c) JPEG-Hance runs only at JPEG qualities where it was measured to help (the decoder's
       ``hance="auto"``);
-  (d) rendering the focal stack straight from centre view + disparity is not offered: it
-      needs one remap per view and plane (16 x 49 for 7x7), against 49 remaps plus the
-      fused shift-and-sum; from the measured parts (49 remaps ~60 ms, SaS 16 planes
-      ~164 ms at 7x7x375x540) that is ~1 s against ~0.22 s. Not measured directly.
+  (d) rendering the focal stack straight from centre view + disparity is not offered: each
+      plane would need one scattered (gathered) sample of the centre per view and pixel,
+      13 x 49 per pixel for the default planes of a 7x7 grid (~130 M scalar gathers, over a
+      second on the development CPU), where the fused warp gathers once per view and pixel
+      (~80-150 ms for 7x7x375x540) and the separable shift-and-sum then streams the views
+      with vectorised rows (~40-60 ms for 13 planes). Measured parts, not measured directly.
 
 The stages live in :mod:`lfstream.stream.stages`, each owning its statistics; this module
 wires them: channels, queues, threads, and the summary. An error in any stage stops the
