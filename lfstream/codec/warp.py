@@ -80,7 +80,7 @@ def warp_views(
         return apply_gains(flat, gains)
     import numba
 
-    from lfstream.codec._kernels import pack_lanes, warp_all_views
+    from lfstream.codec._kernels import _LANES, pack_lanes, warp_all_views
 
     if gains is None:
         gains = np.ones((0, 0, 1, 1, 1), np.float32)
@@ -92,8 +92,8 @@ def warp_views(
     out = np.empty((u, v, h, w * c), np.uint8)
     d = np.ascontiguousarray(d)
     packed = np.empty(h * w, np.uint64)
-    for ch0 in range(0, c, 3):  # three channels per pass, in the lanes of one uint64
-        n_ch = min(3, c - ch0)
+    for ch0 in range(0, c, _LANES):  # three channels per pass, in the lanes of one uint64
+        n_ch = min(_LANES, c - ch0)
         pack_lanes(src, ch0, n_ch, packed)
         warp_all_views(packed, c, ch0, n_ch, d, u, v, bool(occlusion), gains, rows, row_w, cols, col_w,
                        numba.get_num_threads(), out)
