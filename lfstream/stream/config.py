@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
-from lfstream.codec.encoder import PRESETS
+from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS, Encoder
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.errors import LFValueError
 from lfstream.optics import PlenopticCamera
@@ -77,6 +77,10 @@ class StreamConfig:
     fps: float = 30.0
     # the capturing camera, when known: each focal plane then records its refocus distance
     camera: PlenopticCamera | None = None
+
+    def encoder(self) -> Encoder:
+        """The encoder these fields describe (before rate control, which picks its own)."""
+        return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset or DEFAULT_PRESET)
 
     def validate(self) -> None:
         """Raises :class:`LFValueError` naming the first field out of its range."""

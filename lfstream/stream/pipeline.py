@@ -135,7 +135,7 @@ class Pipeline:
 
         t_warm = time.perf_counter()
         try:
-            warm_kernels(cfg, encode=self.source is not None, decode=self.sender is None)
+            warm_kernels(cfg, decode=self.sender is None)
         except Exception:  # noqa: BLE001 - the warm-up only loads kernels: whatever failed here
             pass  # fails again in its stage, which reports it with the stage and frame
         t_start = time.perf_counter()

@@ -19,7 +19,7 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet
 from lfstream.codec.decoder import DecodedFrame, Decoder
-from lfstream.codec.encoder import DEFAULT_PRESET, Encoder
+from lfstream.codec.encoder import Encoder
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.stream.config import StreamConfig
 from lfstream.stream.frames import SourceFrame, StackFrame
@@ -190,7 +190,7 @@ class EncoderStage(ConsumerStage):
                  config: StreamConfig, expect_frames: bool, present: np.ndarray | None = None) -> None:
         super().__init__(control, stats, q_in)
         self.channel, self.config, self.expect_frames, self.present = channel, config, expect_frames, present
-        self.encoder = Encoder(quality=config.quality, depth_hint=config.depth_hint, preset=config.preset or DEFAULT_PRESET)
+        self.encoder = config.encoder()
         self.rate = RateStats()
         self.started = False
 

@@ -18,19 +18,20 @@ from lfstream.stream.config import StreamConfig
 WARMUP_SHAPE = (3, 3, 24, 32, 3)
 
 
-def warm_kernels(config: StreamConfig, encode: bool = True, decode: bool = True) -> None:
+def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     """Runs the encoder, decoder, focal stack and metrics of ``config`` once on a tiny light
-    field, so that their kernels are loaded (networks are not run: they load on their own)."""
+    field, so that their kernels are loaded (networks are not run: they load on their own).
+    ``decode=False`` (a stream that ends at the transport) stops after the encoder; a stream
+    that starts at the transport still encodes the tiny frame, to have a packet to decode."""
     u, v, h, w, c = WARMUP_SHAPE
     yy, xx = np.mgrid[0:h, 0:w]
     ramp = ((yy * 5 + xx * 3) % 256).astype(np.uint8)
     lf = np.ascontiguousarray(np.broadcast_to(ramp[None, None, :, :, None], (u, v, h, w, c)))
     from lfstream.codec.decoder import Decoder
-    from lfstream.codec.encoder import DEFAULT_PRESET, Encoder
 
-    encoder = Encoder(quality=config.quality, depth_hint=config.depth_hint, preset=config.preset or DEFAULT_PRESET)
+    encoder = config.encoder()
     packet = encoder.encode_frame(lf, 0, 0)
-    if encode and not decode:
+    if not decode:
         return
     header = encoder.header((u, v), (h, w), config.fps)
     # the networks are not warmed here (they load their weights when a decoder needs them)
