@@ -10,6 +10,13 @@ Convention (stated once, used everywhere):
 * Disparity (HCI convention): a scene point at pixel ``(y, x)`` of the centre view with
   disparity ``d`` appears at ``(y - d*(u - u0), x - d*(v - v0))`` in view ``(u, v)``;
   ``d > 0`` means nearer than the focal plane. Units are pixels per view step.
+* View axes: a capture whose grid is not aligned with the image axes (a camera array with
+  its rows flipped, its row and column baselines unequal, or the rig rotated against the
+  sensor) moves a point by ``d * A @ (u - u0, v - v0)`` instead, where ``A`` is a 2x2
+  matrix mapping a view step to a displacement ``(dy, dx)`` per unit disparity; the
+  convention above is ``A = I``. The codec estimates ``A`` per stream and sends it with the
+  depth hint (:mod:`lfstream.codec.hint`); :func:`view_offsets` is the one place that
+  turns it into per-view offsets.
 
 Every function here accepts a numpy array or a torch tensor and returns the same kind,
 because they are pure re-indexing or averaging operations.
@@ -83,6 +90,29 @@ def check_lf(lf: object, name: str = "lf", allow_video: bool = True) -> tuple[in
     if shape[-1] not in (1, 3, 4):
         raise LFShapeError(f"{name}: last axis must be colour channels (1, 3 or 4), got {shape[-1]} in {shape}")
     return shape
+
+
+def view_offsets(views: tuple[int, int], axes: np.ndarray | None = None) -> np.ndarray:
+    """The displacement of every view per unit of centre-view disparity: view ``(u, v)``
+    samples the centre view at ``(y, x) + d * offsets[u, v]``.
+
+    Args:
+        views: ``(U, V)``.
+        axes: ``(2, 2)`` view axes ``A`` (rows ``dy, dx``; columns a step in ``u``, in
+            ``v``); ``None``: the convention, ``A = I``, so ``offsets[u, v] = (u - u0, v - v0)``.
+
+    Shape:
+        - output: ``(U, V, 2)`` float32
+    """
+    u, v = views
+    steps = np.stack(np.meshgrid(np.arange(u) - u // 2, np.arange(v) - v // 2, indexing="ij"), axis=-1)
+    steps = steps.astype(np.float64)
+    if axes is not None:
+        a = np.asarray(axes, np.float64)
+        if a.shape != (2, 2) or not np.all(np.isfinite(a)):
+            raise LFValueError(f"axes: expected a finite (2, 2) matrix, got shape {a.shape}")
+        steps = steps @ a.T
+    return steps.astype(np.float32)
 
 
 def lf_dims(lf: ArrayT) -> tuple[int, int, int, int, int]:
@@ -350,6 +380,7 @@ def check_finite(x: ArrayT, name: str = "lf") -> None:
 
 
 __all__ = [
+    "view_offsets",
     "to_network_input",
     "MAX_VIEWS_PER_AXIS",
     "MAX_VIEW_SIDE",

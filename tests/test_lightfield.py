@@ -97,3 +97,17 @@ def test_uint8_float_boundary():
 def test_bad_shapes_raise(bad):
     with pytest.raises(LFShapeError):
         centre_view(bad)
+
+
+def test_view_offsets_follow_the_convention_and_the_view_axes():
+    from lfstream.lightfield import view_offsets
+
+    off = view_offsets((3, 5))
+    assert off.shape == (3, 5, 2) and off.dtype == np.float32
+    assert off[1, 2].tolist() == [0.0, 0.0]  # the centre view does not move
+    assert off[0, 4].tolist() == [-1.0, 2.0]  # (u - u0, v - v0)
+    axes = np.array([[-1.1, -0.05], [0.02, 0.9]])
+    assert np.allclose(view_offsets((3, 5), axes)[0, 4], axes @ [-1.0, 2.0], atol=1e-6)
+    assert np.array_equal(view_offsets((3, 5), np.eye(2)), off)
+    with pytest.raises(LFValueError, match="axes"):
+        view_offsets((3, 5), np.full((2, 2), np.nan))

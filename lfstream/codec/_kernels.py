@@ -239,11 +239,12 @@ def _row_sample3_gain(packed, i00, i01, i10, i11, fxs, fys, top, bottom, wa, dst
 
 
 @numba.njit(**_PARALLEL)
-def warp_all_views(packed, channels, ch0, n_ch, disp, n_u, n_v, occlusion, gains, g_rows, g_row_w, g_cols,
+def warp_all_views(packed, channels, ch0, n_ch, disp, offsets, occlusion, gains, g_rows, g_row_w, g_cols,
                    g_col_w, chunks, out):  # pragma: no cover - compiled
     """Every view of a light field from its centre view and disparity, in one parallel pass.
 
-    View (u, v) pixel (y, x) samples the centre at ``(y + d * du, x + d * dv)`` (bilinear,
+    View (u, v) pixel (y, x) samples the centre at ``(y + d * du, x + d * dv)``, ``(du, dv) =
+    offsets[u, v]`` (:func:`lfstream.lightfield.view_offsets`; bilinear,
     1/1024-pixel fixed point, border replicated), where ``d`` is the centre
     map forward-splatted into the view with a z-test, holes filled from the background side
     (``occlusion``), or the centre map at the view pixel; the sample is multiplied by the
@@ -254,6 +255,7 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, n_u, n_v, occlusion, gains
             (:func:`pack_lanes`).
         channels: C of the output; ch0, n_ch: the channels this call writes (n_ch <= 3).
         disp: (H, W) float32 centre-view disparity.
+        offsets: (U, V, 2) float32 displacement of each view per unit disparity.
         gains: (U, V, gh, gw, Cg) float32 gain maps (Cg = 1 or C), or shape (0, 0, 1, 1, 1): none.
         g_rows, g_row_w: (H, 2) int64 grid rows per image row and the weight of the first.
         g_cols, g_col_w: (W, 2) and (W,) the same per column.
@@ -261,8 +263,9 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, n_u, n_v, occlusion, gains
         out: (U, V, H, W*C) uint8; channels ch0 .. ch0 + n_ch - 1 are overwritten.
     """
     h, w = disp.shape
+    n_v = offsets.shape[1]
     has_gains = gains.shape[0] > 0
-    n_views = n_u * n_v
+    n_views = offsets.shape[0] * n_v
     chunks = max(1, min(chunks, n_views))
     # one task per thread, views dealt round-robin: the scratch maps are allocated once per
     # task (an 800 KB allocation per view was mmap'ed and page-faulted afresh: measured
@@ -280,20 +283,20 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, n_u, n_v, occlusion, gains
         gh = gains.shape[2] if has_gains else 1
         gcols = np.ones((gh, w * n_ch), np.float32)
         for k in range(task, n_views, chunks):
-            _warp_view(packed, channels, ch0, n_ch, disp, n_u, n_v, k // n_v, k % n_v, occlusion, gains, g_rows,
+            _warp_view(packed, channels, ch0, n_ch, disp, offsets, k // n_v, k % n_v, occlusion, gains, g_rows,
                        g_row_w, g_cols, g_col_w, dview, d_row, src_x, i00, i01, i10, i11, fxs, fys, gcols, out)
 
 
 @numba.njit(**_ROW)
-def _warp_view(packed, channels, ch0, n_ch, disp, n_u, n_v, u, v, occlusion, gains, g_rows, g_row_w, g_cols, g_col_w,
+def _warp_view(packed, channels, ch0, n_ch, disp, offsets, u, v, occlusion, gains, g_rows, g_row_w, g_cols, g_col_w,
                dview, d_row, src_x, i00, i01, i10, i11, fxs, fys, gcols, out):  # pragma: no cover - compiled
     """One view of :func:`warp_all_views`, in the caller's scratch buffers."""
     h, w = disp.shape
     has_gains = gains.shape[0] > 0
     cg = gains.shape[4]
-    du = np.float32(u - n_u // 2)
-    dv = np.float32(v - n_v // 2)
-    splatted = occlusion and not (u == n_u // 2 and v == n_v // 2)
+    du = offsets[u, v, 0]
+    dv = offsets[u, v, 1]
+    splatted = occlusion and not (du == 0 and dv == 0)
     if splatted:
         _splat_view(disp, du, dv, dview)
     # the gain map up-sampled along x once per view (gh rows); each image row then

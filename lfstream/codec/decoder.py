@@ -43,6 +43,7 @@ class DecodedFrame:
     lf: np.ndarray  # (U, V, H, W, 3) uint8
     centre: np.ndarray  # (H, W, 3) uint8, the decoded centre view
     disparity: np.ndarray  # (H, W) float32 centre-view disparity the warp used
+    axes: np.ndarray | None = None  # (2, 2) view axes the disparity moves along; None: the convention
 
 
 @dataclass
@@ -88,6 +89,7 @@ class Decoder:
             self._hance = load_model("jpeg_hance", self.preset, self.device)
         self._hints = HintDecoder()
         self._last_disparity: np.ndarray | None = None
+        self._last_axes: np.ndarray | None = None
         self.hint_fallbacks = 0  # delta hints whose reference frame never arrived
         self._depth_net = None
         if self.depth == "net":
@@ -127,39 +129,43 @@ class Decoder:
         """Warps a decoded centre view by a given centre-view disparity (occlusion-aware) and
         applies the packet's shading gains; also serves callers that reuse a disparity (the
         packet's hint is still read, so later delta hints can refer to it)."""
+        axes = self._last_axes
         if packet.hint and self.estimates_depth:
             try:
-                self._hints.parse(packet.hint, self.header.size, packet.seq)
+                axes = self._last_axes = self._hints.parse(packet.hint, self.header.size, packet.seq).axes
             except HintReferenceError:
                 self.hint_fallbacks += 1
-        return self._warp(packet, centre, disparity)
+        return self._warp(packet, centre, disparity, axes)
 
-    def _hint_disparity(self, packet: Packet, centre: np.ndarray) -> np.ndarray:
-        """The packet's hint, decoded; where it is a delta to a frame that never arrived (a
-        lossy transport), the last disparity this decoder produced stands in until the
-        next key hint (counted in :attr:`hint_fallbacks`)."""
+    def _hint_disparity(self, packet: Packet, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The packet's hint, decoded, and its view axes; where it is a delta to a frame that
+        never arrived (a lossy transport), the last disparity this decoder produced stands
+        in until the next key hint (counted in :attr:`hint_fallbacks`)."""
         h, w = self.header.size
         try:
-            d = self._hints.decode(packet.hint, (h, w), guide=centre, frame=packet.seq)
+            d, self._last_axes = self._hints.decode_with_axes(packet.hint, (h, w), guide=centre, frame=packet.seq)
         except HintReferenceError:
             self.hint_fallbacks += 1
             d = self._last_disparity if self._last_disparity is not None else np.zeros((h, w), np.float32)
         self._last_disparity = d
-        return d
+        return d, self._last_axes
 
     def _gains(self, packet: Packet) -> np.ndarray | None:
         return decode_gains(packet.gain, self.header.views, packet.seq) if packet.gain else None
 
-    def _warp(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray) -> DecodedFrame:
+    def _warp(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray,
+              axes: np.ndarray | None = None) -> DecodedFrame:
         # the warp kernel multiplies the gains in as it samples (no second pass over the views)
-        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion, gains=self._gains(packet))
-        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity)
+        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion, gains=self._gains(packet),
+                        axes=axes)
+        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes)
 
-    def _finish(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray, lf: np.ndarray) -> DecodedFrame:
+    def _finish(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray, lf: np.ndarray,
+                axes: np.ndarray | None) -> DecodedFrame:
         gains = self._gains(packet)
         if gains is not None:
             lf = apply_gains(lf, gains)
-        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity)
+        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes)
 
     def decode_batch(self, packets: list[Packet], centres: np.ndarray | None = None) -> list[DecodedFrame]:
         """Decodes several packets; the networks run once over the batch. ``centres``: the
@@ -170,21 +176,24 @@ class Decoder:
         if centres is None:
             centres = self.decode_centres(packets)
         hints: list[np.ndarray | None] = []
+        axes: list[np.ndarray | None] = []
         for p, centre in zip(packets, centres):
             use_hint = self.depth in ("hint", "net") or (self.depth == "auto" and p.hint)
             if use_hint and not p.hint:
                 raise BitstreamError("packet has no depth hint", p.seq)
-            hints.append(self._hint_disparity(p, centre) if use_hint else None)
+            d, a = self._hint_disparity(p, centre) if use_hint else (None, None)
+            hints.append(d)
+            axes.append(a)
         if self._depth_net is None:
-            return [self._warp(p, centre, hint if hint is not None else np.zeros((h, w), np.float32))
-                    for p, centre, hint in zip(packets, centres, hints)]
+            return [self._warp(p, centre, hint if hint is not None else np.zeros((h, w), np.float32), a)
+                    for p, centre, hint, a in zip(packets, centres, hints, axes)]
         from lfstream.models.depth_net import predict_view_disparities
 
         stacked = np.stack(hints) if self._depth_net.config.hint else None
         view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device)
         u0, v0 = self.header.views[0] // 2, self.header.views[1] // 2
-        return [self._finish(p, centre, maps[u0, v0], warp_views_per_view(centre, maps))
-                for p, centre, maps in zip(packets, centres, view_maps)]
+        return [self._finish(p, centre, maps[u0, v0], warp_views_per_view(centre, maps, a), a)
+                for p, centre, maps, a in zip(packets, centres, view_maps, axes)]
 
 
 def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),

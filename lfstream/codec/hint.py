@@ -11,10 +11,22 @@ range is the scene's own: a coarse pass at ``1 / coarse_scale`` over ``+-search_
 px per view step finds it, or the previous frame's range does in a video
 (:class:`HintTracker`).
 
+View axes: a capture whose view grid is not aligned with the image axes (a camera array
+with flipped rows, unequal row and column baselines, a rotated rig; see
+:func:`lfstream.lightfield.view_offsets`) is detected on a stream's first frame by dense
+optical flow from the centre view to the edge mid-point views and a rank-1 fit of the flows
+(:func:`estimate_view_axes`); the sweep and the decoder's warp then move points along those
+axes. Light fields that follow the convention keep ``A = I`` (the fit must explain the flows
+far better than the convention, and change a warped pixel by a quarter of a pixel or more).
+
 Payload (version 2, little-endian)::
 
     version u8 = 2 | kind u8 (0 full, 1 delta, 2 repeat) | scale u8 | reserved u8
     lo f32 | hi f32 | hs u16 | ws u16 | ref u32 | zstd(body)
+
+Version 3 is version 2 followed by the view axes, ``A`` as 4 f32 (row-major), before the
+body; it is written only when ``A`` is not the identity, so a stream that follows the
+convention is byte for byte what it was.
 
 ``full``: the ``hs x ws`` map quantised to 8 bits over ``[lo, hi]``, coded as its planar
 prediction residual (``q - left - up + upleft``, mod 256); ``delta``: the
@@ -29,14 +41,14 @@ guided by the decoded centre view (edges of the depth follow edges of the pictur
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 import zstandard
 
 from lfstream.errors import BitstreamError, LFShapeError, LFValueError
-from lfstream.lightfield import check_lf, to_uint8
+from lfstream.lightfield import check_lf, to_uint8, view_offsets
 
 
 class HintReferenceError(BitstreamError):
@@ -45,7 +57,13 @@ class HintReferenceError(BitstreamError):
 
 _HEADER_V1 = struct.Struct("<BffHH")
 _HEADER_V2 = struct.Struct("<BBBBffHHI")
+_AXES = struct.Struct("<4f")
 HINT_VERSION = 2
+HINT_VERSION_AXES = 3
+GEOMETRY_MODES = ("auto", "standard")
+#: Largest entry of a view-axes matrix a payload may carry (|A| <= 8: a view step moving a
+#: point eight times its disparity is not a light field this codec models).
+MAX_AXIS_ENTRY = 8.0
 KIND_FULL, KIND_DELTA, KIND_REPEAT = 0, 1, 2
 _ZSTD_LEVEL = 9  # small maps: level 19 costs ~3 ms for a few hundred bytes less
 
@@ -69,6 +87,8 @@ class HintOptions:
         search_limit: largest ``|disparity|`` (px per view step) the range pass considers.
         key_interval: in a video, a full (non-delta) map at least every this many frames,
             so a receiver that lost packets recovers.
+        geometry: ``"auto"`` estimates the capture's view axes on a stream's first frame
+            (:func:`estimate_view_axes`); ``"standard"`` assumes the convention (``A = I``).
     """
 
     max_disparity: float | None = None
@@ -79,6 +99,7 @@ class HintOptions:
     coarse_scale: int = 8
     search_limit: float = 16.0
     key_interval: int = 30
+    geometry: str = "auto"
 
     def validate(self) -> None:
         if self.max_disparity is not None and not (np.isfinite(self.max_disparity) and 0 < self.max_disparity <= 64):
@@ -89,6 +110,8 @@ class HintOptions:
             raise LFValueError("hint options: work_scale in 1..hint_scale")
         if not (0.01 <= self.step <= 2 and 0 < self.search_limit <= 64 and self.key_interval >= 1):
             raise LFValueError("hint options: step in [0.01, 2], search_limit in (0, 64], key_interval >= 1")
+        if self.geometry not in GEOMETRY_MODES:
+            raise LFValueError(f"hint options: geometry one of {', '.join(GEOMETRY_MODES)}, got {self.geometry!r}")
 
     def as_meta(self) -> dict:
         """What the stream header records about the hint."""
@@ -104,11 +127,19 @@ class HintMap:
         disparity: ``(hs, ws)`` float32, pixels (of the full view) per view step.
         scale: full resolution / map resolution.
         search: ``(lo, hi)`` the sweep covered.
+        axes: ``(2, 2)`` float32 view axes the disparity is measured along
+            (:func:`lfstream.lightfield.view_offsets`); the identity for the convention.
     """
 
     disparity: np.ndarray
     scale: int
     search: tuple[float, float]
+    axes: np.ndarray = field(default_factory=lambda: np.eye(2, dtype=np.float32))
+
+
+def is_standard(axes: np.ndarray | None) -> bool:
+    """Whether view axes are the convention's (``None`` or exactly the identity)."""
+    return axes is None or bool(np.array_equal(np.asarray(axes), np.eye(2)))
 
 
 def sweep_views(u: int, v: int, present: np.ndarray | None = None) -> list[tuple[int, int]]:
@@ -176,6 +207,141 @@ def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale:
     return out
 
 
+# view-axes detection (see the module docstring)
+_AXES_SCALE = 4  # the detection's resolution divisor; an accepted fit is refined at the sweep's
+_AXES_MAX_GAIN = 0.5  # the fit's mean flow residual must be below this share of the convention's
+_AXES_MIN_SHIFT = 0.25  # px of the full view a warped pixel must move for the axes to matter
+
+
+def _flows(images: np.ndarray, scale: int, preset: int) -> np.ndarray:
+    """Dense optical flow (OpenCV's DIS) from ``images[0]`` to each other image, in pixels
+    of the full view: ``images[0](x) ~ images[j](x + flow[j - 1](x))``.
+
+    Shape:
+        - images: ``(1 + J, h, w)`` float32 in [0, 1]
+        - output: ``(J, h, w, 2)`` float32, ``(dx, dy)``
+    """
+    dis = cv2.DISOpticalFlow_create(preset)
+    as8 = [np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8) for img in images]
+    return np.stack([dis.calc(as8[0], img, None) for img in as8[1:]]) * np.float32(scale)
+
+
+def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int) -> tuple[np.ndarray, bool]:
+    """The view axes that best explain the flows from the centre image to the others, and
+    whether they explain them clearly better than the convention (and matter).
+
+    Every view j moves a centre pixel by ``-d(x) * A @ steps[j]``: over the views the flows
+    of a pixel are one vector ``g = (A @ steps[j])_j`` times a per-pixel scalar, so ``g``
+    is the leading eigenvector of the flows' second moments (textured pixels, outliers
+    dropped twice), and ``A`` its least-squares fit. Normalised so that a step along ``v``
+    moves a point by ``-d`` along ``x`` as in the convention (``A[1, 1] = 1``; ``A[0, 0] = 1``
+    where the grid has one column).
+
+    Args:
+        images: ``(1 + J, h, w)`` luma at ``1 / scale``; images[0] the centre view.
+        steps: ``(J, 2)`` view steps ``(u - u0, v - v0)`` of the other images.
+        preset: OpenCV's DIS preset.
+    """
+    identity = np.eye(2, dtype=np.float32)
+    _, h, w = images.shape
+    # textured pixels away from the border (where points leave the view) carry the fit
+    by, bx = max(2, h // 10), max(2, w // 10)
+    if (h - 2 * by) * (w - 2 * bx) < 64:
+        return identity, False
+    gy, gx = np.gradient(images[0][by - 1:h - by + 1, bx - 1:w - bx + 1])
+    texture = np.hypot(gx, gy)[1:-1, 1:-1].ravel()
+    sel = np.flatnonzero(texture > np.median(texture))
+    if sel.size < 32:
+        return identity, False
+    flows = _flows(images, scale, preset)[:, by:h - by, bx:w - bx].reshape(len(steps), -1, 2)[:, sel]
+    f = np.empty((2 * len(steps), sel.size), np.float64)  # rows dy_j, dx_j; one column per pixel
+    f[0::2] = flows[..., 1]
+    f[1::2] = flows[..., 0]
+    weight = np.sqrt(texture[sel])
+    if not np.all(np.isfinite(f)):
+        return identity, False
+    k = np.zeros((2 * len(steps), 4))
+    k[0::2, 0:2] = steps
+    k[1::2, 2:4] = steps
+
+    def residual(g: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        g = g / (np.linalg.norm(g) or 1.0)
+        return np.linalg.norm(cols - np.outer(g, g @ cols), axis=0)
+
+    for _ in range(3):
+        wf = f * weight
+        g = np.linalg.eigh(wf @ wf.T)[1][:, -1]
+        r = residual(g, f)
+        keep = r <= 3.0 * np.median(r) + 1e-6
+        if keep.sum() < 32:
+            break
+        f, weight = f[:, keep], weight[keep]
+    a = np.linalg.lstsq(k, g, rcond=None)[0].reshape(2, 2)
+    has_u, has_v = bool(np.any(steps[:, 0])), bool(np.any(steps[:, 1]))
+    ref = a[1, 1] if has_v else a[0, 0]
+    if abs(ref) < 0.1 * (np.abs(a).max() + 1e-12):  # the v axis barely moves along x: not a light field
+        return identity, False
+    a = a / ref
+    if not has_u:
+        a[:, 0] = (1.0, 0.0)
+    if not has_v:
+        a[:, 1] = (0.0, 1.0)
+    if not np.all(np.isfinite(a)) or np.abs(a).max() > MAX_AXIS_ENTRY:
+        return identity, False
+    better = residual(k @ a.ravel(), f).mean() < _AXES_MAX_GAIN * residual(k @ identity.ravel(), f).mean()
+    # how far the axes move a warped pixel against the convention, at the outermost view
+    moved = np.linalg.norm(steps @ a.T, axis=1)
+    change = np.linalg.norm(steps @ (a - identity).T, axis=1) / np.maximum(moved, 1e-9)
+    magnitude = np.hypot(f[0::2], f[1::2])  # (J, N) flow lengths
+    shift = float(np.percentile((magnitude * change[:, None]).max(axis=0), 98))
+    return a.astype(np.float32), bool(better and shift >= _AXES_MIN_SHIFT)
+
+
+def _axes_views(keys: list[tuple[int, int]], centre: tuple[int, int]) -> list[int]:
+    """Which sweep views the axes detection uses: those on the centre's row and column
+    (pure steps along one axis) where each axis of the grid has one, else all."""
+    on_axis = [j for j, (a, b) in enumerate(keys) if (a == centre[0]) != (b == centre[1])]
+    u_ok = any(keys[j][0] != centre[0] for j in on_axis) or all(a == centre[0] for a, _ in keys)
+    v_ok = any(keys[j][1] != centre[1] for j in on_axis) or all(b == centre[1] for _, b in keys)
+    return on_axis if on_axis and u_ok and v_ok else list(range(len(keys)))
+
+
+def _detect_axes(grids: np.ndarray, steps: np.ndarray, use: list[int], work: int) -> np.ndarray:
+    """The view axes of a frame from its sweep grids (centre first, then the views of
+    ``steps``), by optical flow on the views ``use``: detected at ``1 / _AXES_SCALE`` on
+    OpenCV's fast preset (every stream pays this, a few milliseconds), refined at the working
+    resolution on the medium preset for captures off the convention only."""
+    factor = max(1, _AXES_SCALE // work)
+    grids = grids[[0, *(1 + j for j in use)]]
+    steps = steps[use]
+    coarse = _coarser(grids, factor) if factor > 1 else grids
+    if min(coarse.shape[1:]) < 16:
+        return np.eye(2, dtype=np.float32)
+    axes, found = _fit_axes(coarse, steps, work * factor, cv2.DISOPTICAL_FLOW_PRESET_FAST)
+    if not found:
+        return np.eye(2, dtype=np.float32)
+    fine, found = _fit_axes(grids, steps, work, cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    return fine if found else axes
+
+
+def estimate_view_axes(lf: np.ndarray, present: np.ndarray | None = None, work_scale: int = 2) -> np.ndarray:
+    """The view axes of a light field (:func:`lfstream.lightfield.view_offsets`): the
+    identity where it follows the convention, else the 2x2 matrix its views move along.
+
+    Shape:
+        - lf: ``(U, V, H, W, C)``
+        - output: ``(2, 2)`` float32
+    """
+    u, v, h, w, _ = check_lf(lf, allow_video=False)
+    frame = np.ascontiguousarray(to_uint8(np.asarray(lf)))
+    keys = sweep_views(u, v, present)
+    centre = (u // 2, v // 2)
+    if not keys:
+        return np.eye(2, dtype=np.float32)
+    steps = np.asarray([(a - centre[0], b - centre[1]) for a, b in keys], np.float64)
+    return _detect_axes(_grids(frame, [centre, *keys], work_scale), steps, _axes_views(keys, centre), work_scale)
+
+
 def scene_range(disparity: np.ndarray, margin: float) -> tuple[float, float]:
     """Robust range of a disparity map (1st..99th percentile), widened by ``margin``."""
     lo, hi = np.percentile(disparity, [1, 99]) if disparity.size else (0.0, 0.0)
@@ -183,7 +349,7 @@ def scene_range(disparity: np.ndarray, margin: float) -> tuple[float, float]:
 
 
 def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), present: np.ndarray | None = None,
-                      search: tuple[float, float] | None = None) -> HintMap:
+                      search: tuple[float, float] | None = None, axes: np.ndarray | None = None) -> HintMap:
     """The centre view's disparity at the hint's resolution.
 
     Args:
@@ -192,6 +358,8 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
         present: ``(U, V)`` mask of views that exist (e.g. an HCI "star").
         search: ``(lo, hi)`` range to sweep (a video's previous frame); ``None``: the options'
             ``max_disparity``, else a coarse pass finds the scene's range.
+        axes: the capture's view axes (a video's first frame); ``None``: detected
+            (``options.geometry == "auto"``) or the convention.
 
     Shape:
         - lf: ``(U, V, H, W, C)``
@@ -205,11 +373,19 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     work = max(1, min(options.work_scale, s))
     s -= s % work  # the sent grid is made of whole working-resolution blocks
     hs, ws = max(1, h // s), max(1, w // s)
+    identity = np.eye(2, dtype=np.float32)
     if not keys:
-        return HintMap(np.zeros((hs, ws), np.float32), s, (0.0, 0.0))
+        return HintMap(np.zeros((hs, ws), np.float32), s, (0.0, 0.0), identity if axes is None else axes)
     centre = (u // 2, v // 2)
-    offsets = np.asarray([(a - centre[0], b - centre[1]) for a, b in keys], np.float32)
+    steps = np.asarray([(a - centre[0], b - centre[1]) for a, b in keys], np.float64)
     grids = _grids(frame, [centre, *keys], work)
+    if axes is None:
+        axes = identity
+        if options.geometry == "auto":
+            axes = _detect_axes(grids, steps, _axes_views(keys, centre), work)
+    axes = np.asarray(axes, np.float32)
+    rows, cols = np.asarray(keys).T
+    offsets = np.ascontiguousarray(view_offsets((u, v), axes)[rows, cols])
     if search is None:
         if options.max_disparity is not None:
             search = (-options.max_disparity, options.max_disparity)
@@ -232,7 +408,7 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     f = s // work
     if f > 1:  # the sent grid: block means of the working-resolution map
         disp = cv2.resize(disp[: hs * f, : ws * f], (ws, hs), interpolation=cv2.INTER_AREA)
-    return HintMap(disp, s, (float(lo), float(hi)))
+    return HintMap(disp, s, (float(lo), float(hi)), axes)
 
 
 def estimate_disparity(lf: np.ndarray, options: HintOptions = HintOptions(),
@@ -270,6 +446,7 @@ class QuantisedHint:
     lo: float
     hi: float
     scale: int
+    axes: np.ndarray | None = None  # (2, 2) float32 view axes; None: the convention
 
     def values(self) -> np.ndarray:
         span = self.hi - self.lo if self.hi > self.lo else 1.0
@@ -283,12 +460,16 @@ def quantise(hm: HintMap, search: tuple[float, float] | None = None) -> Quantise
     span = hi - lo if hi > lo else 1.0
     q = np.clip(np.round((d - lo) / span * 255.0), 0, 255).astype(np.uint8)
     # the range as the payload will carry it (float32), so encoder and decoder agree exactly
-    return QuantisedHint(q, float(np.float32(lo)), float(np.float32(hi)), hm.scale)
+    axes = None if is_standard(hm.axes) else np.asarray(hm.axes, np.float32)
+    return QuantisedHint(q, float(np.float32(lo)), float(np.float32(hi)), hm.scale, axes)
 
 
 def _pack(kind: int, qh: QuantisedHint, ref: int, body: bytes) -> bytes:
     hs, ws = qh.q.shape
-    return _HEADER_V2.pack(HINT_VERSION, kind, qh.scale, 0, qh.lo, qh.hi, hs, ws, ref) + body
+    if qh.axes is None:  # the convention: version 2, as before view axes existed
+        return _HEADER_V2.pack(HINT_VERSION, kind, qh.scale, 0, qh.lo, qh.hi, hs, ws, ref) + body
+    return (_HEADER_V2.pack(HINT_VERSION_AXES, kind, qh.scale, 0, qh.lo, qh.hi, hs, ws, ref)
+            + _AXES.pack(*np.asarray(qh.axes, np.float32).ravel().tolist()) + body)
 
 
 def _diff2d(q: np.ndarray) -> np.ndarray:
@@ -340,19 +521,21 @@ class HintTracker:
         self._prev_seq = -1
         self._since_key = 0
         self._search: tuple[float, float] = (0.0, 0.0)  # the key hint's sweep range
+        self._axes: np.ndarray | None = None  # the capture's view axes, from the first frame
 
     def encode(self, lf: np.ndarray, seq: int, present: np.ndarray | None = None) -> bytes:
         """The hint payload of frame ``seq`` (frames must come in order for deltas)."""
         opts = self.options
         prev = self._prev
         key = prev is None or self._since_key + 1 >= opts.key_interval or seq != self._prev_seq + 1
-        hm = estimate_hint_map(lf, opts, present, None if key else self._search)
+        hm = estimate_hint_map(lf, opts, present, None if key else self._search, self._axes)
+        self._axes = hm.axes  # a rig's geometry does not change within a video
         if not key:
             lo, hi = self._search
             edge = 0.02 * (hi - lo)
             pressed = float(np.mean((hm.disparity <= lo + edge) | (hm.disparity >= hi - edge)))
             if pressed > 0.02 and opts.max_disparity is None:  # the scene's range changed: search again
-                hm, key = estimate_hint_map(lf, opts, present), True
+                hm, key = estimate_hint_map(lf, opts, present, axes=self._axes), True
         payload = None
         if not key and prev.q.shape == hm.disparity.shape and prev.scale == hm.scale \
                 and prev.lo <= float(hm.disparity.min()) and float(hm.disparity.max()) <= prev.hi:
@@ -401,7 +584,13 @@ class HintDecoder:
     def decode(self, data: bytes, size: tuple[int, int], guide: np.ndarray | None = None,
                frame: int | None = None) -> np.ndarray:
         """The ``(H, W)`` float32 disparity of a hint payload (see :func:`decode_hint`)."""
-        return _expand(self.parse(data, size, frame), size, guide)
+        return self.decode_with_axes(data, size, guide, frame)[0]
+
+    def decode_with_axes(self, data: bytes, size: tuple[int, int], guide: np.ndarray | None = None,
+                         frame: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """The disparity and the view axes it is measured along (``None``: the convention)."""
+        qh = self.parse(data, size, frame)
+        return _expand(qh, size, guide), qh.axes
 
 
 def _parse(data: bytes, size: tuple[int, int], frame: int | None, refs: dict[int, QuantisedHint]) -> QuantisedHint:
@@ -409,18 +598,24 @@ def _parse(data: bytes, size: tuple[int, int], frame: int | None, refs: dict[int
     if len(data) < 1:
         raise BitstreamError("depth hint: truncated", frame)
     version = data[0]
+    axes = None
     if version == 1:
         if len(data) < _HEADER_V1.size:
             raise BitstreamError("depth hint: truncated", frame)
         _, lo, hi, hs, ws = _HEADER_V1.unpack_from(data)
         kind, scale, ref, body = KIND_FULL, None, 0, data[_HEADER_V1.size:]
-    elif version == HINT_VERSION:
-        if len(data) < _HEADER_V2.size:
+    elif version in (HINT_VERSION, HINT_VERSION_AXES):
+        head = _HEADER_V2.size + (_AXES.size if version == HINT_VERSION_AXES else 0)
+        if len(data) < head:
             raise BitstreamError("depth hint: truncated", frame)
         _, kind, scale, _res, lo, hi, hs, ws, ref = _HEADER_V2.unpack_from(data)
-        body = data[_HEADER_V2.size:]
+        body = data[head:]
         if kind not in (KIND_FULL, KIND_DELTA, KIND_REPEAT) or scale < 1:
             raise BitstreamError(f"depth hint: unknown kind {kind} or scale {scale}", frame)
+        if version == HINT_VERSION_AXES:
+            axes = np.asarray(_AXES.unpack_from(data, _HEADER_V2.size), np.float32).reshape(2, 2)
+            if not (np.all(np.isfinite(axes)) and np.abs(axes).max() <= MAX_AXIS_ENTRY):
+                raise BitstreamError(f"depth hint: bad view axes {axes.ravel().tolist()}", frame)
     else:
         raise BitstreamError(f"depth hint: unknown version {version}", frame)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi and abs(lo) < 1e4 and abs(hi) < 1e4):
@@ -435,7 +630,7 @@ def _parse(data: bytes, size: tuple[int, int], frame: int | None, refs: dict[int
         if base is None or base.q.shape != (hs, ws) or not (np.isclose(base.lo, lo) and np.isclose(base.hi, hi)):
             raise HintReferenceError(f"depth hint: refers to frame {ref}, which this decoder does not have", frame)
         if kind == KIND_REPEAT:
-            return QuantisedHint(base.q, base.lo, base.hi, scale)
+            return QuantisedHint(base.q, base.lo, base.hi, scale, axes)
     try:
         raw = zstandard.ZstdDecompressor().decompress(body, max_output_size=hs * ws)
     except zstandard.ZstdError as exc:
@@ -445,9 +640,9 @@ def _parse(data: bytes, size: tuple[int, int], frame: int | None, refs: dict[int
     q = np.frombuffer(raw, np.uint8).reshape(hs, ws)
     if base is not None:
         q = (base.q.astype(np.int16) + q).astype(np.uint8)
-    elif version == HINT_VERSION:
+    elif version != 1:  # a full map of version 2 or 3: the planar prediction residual
         q = _undiff2d(q)
-    return QuantisedHint(q.copy(), float(lo), float(hi), int(scale))
+    return QuantisedHint(q.copy(), float(lo), float(hi), int(scale), axes)
 
 
 # range weights of the joint bilateral upsampling, by absolute 8-bit grey difference
@@ -495,5 +690,6 @@ def disparity_errors(estimate: np.ndarray, truth: np.ndarray, border: int = 15) 
 
 
 __all__ = ["HintReferenceError", "HintOptions", "HintMap", "HintTracker", "HintDecoder", "QuantisedHint", "sweep_views",
-           "estimate_hint_map", "estimate_disparity", "encode_hint", "decode_hint", "disparity_errors", "scene_range",
+           "estimate_hint_map", "estimate_disparity",
+           "estimate_view_axes", "is_standard", "GEOMETRY_MODES", "encode_hint", "decode_hint", "disparity_errors", "scene_range",
            "quantise"]

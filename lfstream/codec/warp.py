@@ -3,7 +3,8 @@
 ``L(x, u) = C(x + (u - u0) * d(x, u))`` with lfstream's disparity sign: a point at ``x`` in
 the centre view with disparity ``d`` appears at ``x - d * (u - u0)`` in view ``u``, so
 view ``u`` samples the centre view at ``x + d * (u - u0)``. Samples outside the centre view
-are clamped to its border.
+are clamped to its border. A capture with its own view axes ``A``
+(:func:`lfstream.lightfield.view_offsets`) uses ``d * A @ (u - u0)`` in place of ``d * (u - u0)``.
 
 Occlusion: the per-view maps ``d(x, u)`` are the centre map forward-splatted into each view
 with a z-test (the nearer surface wins) and disoccluded holes filled from the background
@@ -15,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from lfstream.errors import LFShapeError, LFValueError
-from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_finite, to_uint8
+from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_finite, to_uint8, view_offsets
 
 
 def _linear_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray]:
@@ -38,6 +39,7 @@ def warp_views(
     views: tuple[int, int],
     occlusion: bool = True,
     gains: np.ndarray | None = None,
+    axes: np.ndarray | None = None,
 ) -> np.ndarray:
     """Synthesises a light field from its centre view and the centre view's disparity.
 
@@ -52,6 +54,8 @@ def warp_views(
         occlusion: per-view disparity by z-tested forward splatting (see module docstring).
         gains: ``(U, V, gh, gw, 1 or C)`` per-view gain maps (:mod:`lfstream.codec.shading`),
             bilinearly up-sampled and multiplied in; ``None``: none.
+        axes: ``(2, 2)`` view axes of the capture (:func:`lfstream.lightfield.view_offsets`);
+            ``None``: the convention.
 
     Shape:
         - output: ``(U, V, H, W, C)`` uint8
@@ -64,6 +68,7 @@ def warp_views(
         raise LFValueError(f"views: each in 1..{MAX_VIEWS_PER_AXIS}, got {views}")
     d = np.broadcast_to(np.asarray(disparity, np.float32), (h, w))
     check_finite(d, "disparity")
+    offsets = view_offsets((u, v), axes)
     src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
     if gains is not None:
         gains = np.ascontiguousarray(gains, np.float32)
@@ -95,18 +100,20 @@ def warp_views(
     for ch0 in range(0, c, _LANES):  # three channels per pass, in the lanes of one uint64
         n_ch = min(_LANES, c - ch0)
         pack_lanes(src, ch0, n_ch, packed)
-        warp_all_views(packed, c, ch0, n_ch, d, u, v, bool(occlusion), gains, rows, row_w, cols, col_w,
+        warp_all_views(packed, c, ch0, n_ch, d, offsets, bool(occlusion), gains, rows, row_w, cols, col_w,
                        numba.get_num_threads(), out)
     return out.reshape(u, v, h, w, c)
 
 
-def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray) -> np.ndarray:
+def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray, axes: np.ndarray | None = None) -> np.ndarray:
     """``L(x, u) = C(x + (u - u0) d(x, u))`` with one disparity map per view (Depth-Net's
     output, seed Fig. 3.2): one OpenCV bilinear remap per view, border clamped.
 
     Args:
         centre: ``(H, W, C)`` uint8 or float in ``[0, 1]``.
         disparities: ``(U, V, H, W)`` px per view step.
+        axes: ``(2, 2)`` view axes (:func:`lfstream.lightfield.view_offsets`); ``None``: the
+            convention.
 
     Shape:
         - output: ``(U, V, H, W, C)`` uint8
@@ -121,15 +128,16 @@ def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray) -> np.ndarr
     c = centre.shape[2]
     src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    offsets = view_offsets((u_n, v_n), axes)
     out = np.empty((u_n, v_n, h, w, c), np.uint8)
     mx = np.empty((h, w), np.float32)
     my = np.empty((h, w), np.float32)
     for a in range(u_n):
         for b in range(v_n):
             d = disparities[a, b].astype(np.float32, copy=False)
-            np.multiply(d, np.float32(b - v_n // 2), out=mx)
+            np.multiply(d, offsets[a, b, 1], out=mx)
             mx += xs
-            np.multiply(d, np.float32(a - u_n // 2), out=my)
+            np.multiply(d, offsets[a, b, 0], out=my)
             my += ys
             dst = out[a, b] if c > 1 else out[a, b, :, :, 0]
             cv2.remap(src if c > 1 else src[:, :, 0], mx, my, cv2.INTER_LINEAR, dst=dst,

@@ -154,3 +154,80 @@ def test_truncated_payloads_are_bitstream_errors(cut):
     payload = H.encode_hint(H.estimate_hint_map(lf))
     with pytest.raises(BitstreamError, match="frame 7"):
         H.decode_hint(payload[:cut], (48, 64), frame=7)
+
+
+# -- view axes (a capture whose view grid is not the convention's) ---------------------------
+
+@pytest.fixture(scope="module")
+def square_scene():
+    return synth_clip(1, 7, (256, 256), seed=0).lf[0]
+
+
+def test_a_light_field_that_follows_the_convention_keeps_the_identity(square_scene):
+    axes = H.estimate_view_axes(square_scene)
+    assert H.is_standard(axes)
+    payload = H.encode_hint(H.estimate_hint_map(square_scene))
+    assert payload[0] == H.HINT_VERSION  # the version-2 payload, byte for byte as before
+
+
+def test_flipped_view_rows_are_detected_sent_and_warped(square_scene):
+    import lfstream
+    from lfstream.metrics import mpsnr
+
+    flipped = np.ascontiguousarray(square_scene[::-1])  # rows of views in reverse order
+    axes = H.estimate_view_axes(flipped)
+    # measured [[-1.027, 0.013], [-0.021, 1]]
+    assert np.abs(axes - np.diag([-1.0, 1.0])).max() < 0.06
+    hm = H.estimate_hint_map(flipped)
+    payload = H.encode_hint(hm)
+    assert payload[0] == H.HINT_VERSION_AXES
+    qh = H.HintDecoder().parse(payload, (256, 256), frame=0)
+    assert np.array_equal(qh.axes, hm.axes)
+    # decoded quality: measured 28.06 dB with the axes, 23.90 without, 28.18 unflipped
+    auto = mpsnr(flipped, lfstream.decode(lfstream.encode(flipped))[0])
+    standard = mpsnr(flipped, lfstream.decode(lfstream.encode(flipped, hint_options=H.HintOptions(geometry="standard")))[0])
+    plain = mpsnr(square_scene, lfstream.decode(lfstream.encode(square_scene))[0])
+    assert auto > standard + 2.0 and auto > plain - 0.5
+
+
+def test_a_video_keeps_its_view_axes_in_delta_and_repeat_hints():
+    clip = synth_clip(3, 7, (128, 192), seed=3, motion=0.0, camera_pan=0.0)
+    frames = np.ascontiguousarray(clip.lf[:, ::-1])
+    tracker = H.HintTracker()
+    payloads = [tracker.encode(f, k) for k, f in enumerate(frames)]
+    dec = H.HintDecoder()
+    got = [dec.decode_with_axes(p, (128, 192), frame=k)[1] for k, p in enumerate(payloads)]
+    assert all(p[0] == H.HINT_VERSION_AXES for p in payloads)
+    assert payloads[1][1] in (H.KIND_DELTA, H.KIND_REPEAT)
+    assert all(np.array_equal(a, got[0]) for a in got) and got[0][0, 0] < 0
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 9.0, -1e30])
+def test_bad_view_axes_in_a_payload_are_bitstream_errors(bad):
+    hm = H.HintMap(np.zeros((4, 4), np.float32), 4, (0.0, 1.0), np.float32([[-1, 0], [0, 1]]))
+    payload = bytearray(H.encode_hint(hm))
+    struct.pack_into("<f", payload, H._HEADER_V2.size, bad)
+    with pytest.raises(BitstreamError, match="frame 3"):
+        H.decode_hint(bytes(payload), (16, 16), frame=3)
+    with pytest.raises(BitstreamError, match="truncated"):
+        H.decode_hint(bytes(payload[:H._HEADER_V2.size + 7]), (16, 16), frame=3)
+
+
+def test_the_view_axes_option_is_validated():
+    with pytest.raises(Exception, match="geometry"):
+        H.HintOptions(geometry="sideways").validate()
+
+
+def test_the_camera_array_sample_is_warped_along_its_own_axes():
+    import lfstream
+    from lfstream.io import read_lf
+    from lfstream.metrics import mpsnr
+    from tests.conftest import shared
+
+    lf = read_lf(shared("toys_array"))
+    axes = H.estimate_view_axes(lf)
+    # its view rows move the scene against the convention, by a longer step, the rig turned
+    # by about 3 degrees (optical flow over the full 9x9 grid: -1.065, -0.053, -0.058)
+    assert -1.12 < axes[0, 0] < -1.02 and -0.1 < axes[0, 1] < -0.02 and -0.1 < axes[1, 0] < -0.02
+    # measured 17.53 dB with the axes, 11.87 with the convention
+    assert mpsnr(lf, lfstream.decode(lfstream.encode(lf))[0]) > 16.5

@@ -10,16 +10,18 @@ import pytest
 from lfstream.codec.shading import apply_gains
 from lfstream.codec.warp import warp_views
 from lfstream.errors import LFShapeError
+from lfstream.lightfield import view_offsets
 from lfstream.synth import synth_clip
 
 
-def _reference_maps(disp: np.ndarray, n_u: int, n_v: int, occlusion: bool) -> np.ndarray:
+def _reference_maps(disp: np.ndarray, n_u: int, n_v: int, occlusion: bool, axes=None) -> np.ndarray:
     """maps[u, v, y, x] = (x_src, y_src), written out in plain Python (the old kernel's rules)."""
     h, w = disp.shape
     maps = np.empty((n_u, n_v, h, w, 2), np.float32)
+    offsets = view_offsets((n_u, n_v), axes)
     for u in range(n_u):
         for v in range(n_v):
-            du, dv = np.float32(u - n_u // 2), np.float32(v - n_v // 2)
+            du, dv = offsets[u, v]
             if not occlusion or (du == 0 and dv == 0):
                 for y in range(h):
                     for x in range(w):
@@ -53,8 +55,8 @@ def _reference_maps(disp: np.ndarray, n_u: int, n_v: int, occlusion: bool) -> np
     return maps
 
 
-def _reference_warp(centre, disp, views, occlusion, gains=None):
-    maps = _reference_maps(disp, *views, occlusion)
+def _reference_warp(centre, disp, views, occlusion, gains=None, axes=None):
+    maps = _reference_maps(disp, *views, occlusion, axes)
     out = np.empty((*views, *centre.shape), np.uint8)
     for u in range(views[0]):
         for v in range(views[1]):
@@ -129,3 +131,20 @@ def test_fused_warp_survives_huge_disparities():
         out = warp_views(centre, np.full(centre.shape[:2], d, np.float32), (3, 3))
         # every sample is clamped to the border: values stay those of the centre's pixels
         assert out.shape == (3, 3, 16, 18, 3) and (out[1, 1] == centre).all()
+
+
+def test_view_axes_move_views_along_them(rng):
+    centre = (rng.random((40, 56, 3)) * 255).astype(np.uint8)
+    disp = rng.uniform(-1.5, 1.5, (40, 56)).astype(np.float32)
+    plain = warp_views(centre, disp, (5, 3))
+    # the identity is the convention, byte for byte
+    assert np.array_equal(warp_views(centre, disp, (5, 3), axes=np.eye(2)), plain)
+    # flipped rows: view u is the convention's view U - 1 - u (exact, the same offsets)
+    assert np.array_equal(warp_views(centre, disp, (5, 3), axes=np.diag([-1.0, 1.0])), plain[::-1])
+    # a general matrix (a camera array's: rows flipped and longer, the rig rotated) against
+    # the plain reference with the same offsets, occlusions included
+    axes = np.array([[-1.08, -0.06], [-0.05, 1.0]])
+    centre, disp = _scene()
+    for occlusion in (True, False):
+        _assert_close(warp_views(centre, disp, (5, 3), occlusion=occlusion, axes=axes),
+                      _reference_warp(centre, disp, (5, 3), occlusion, axes=axes))
