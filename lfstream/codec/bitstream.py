@@ -135,11 +135,27 @@ def _compress_json(obj: dict) -> bytes:
     return zstandard.ZstdCompressor(level=10).compress(json.dumps(obj, sort_keys=True).encode())
 
 
+def decompress_bounded(data: bytes, limit: int) -> bytes:
+    """zstd-decompresses one frame of at most ``limit`` bytes.
+
+    ``max_output_size`` alone does not bound it: python-zstandard allocates whatever
+    content size the frame header declares (a damaged or hostile 2^60 is a MemoryError, a
+    few GB an allocation), so the declared size is checked first.
+
+    Raises:
+        zstandard.ZstdError: a bad frame, or one that declares or yields more than ``limit``.
+    """
+    size = zstandard.get_frame_parameters(data).content_size
+    if size not in (zstandard.CONTENTSIZE_UNKNOWN, zstandard.CONTENTSIZE_ERROR) and size > limit:
+        raise zstandard.ZstdError(f"the frame declares {size} bytes, more than the {limit} expected")
+    return zstandard.ZstdDecompressor().decompress(data, max_output_size=limit)
+
+
 def _decompress_json(data: bytes, limit: int, what: str, frame: int | None = None) -> dict:
     if not data:
         return {}
     try:
-        raw = zstandard.ZstdDecompressor().decompress(data, max_output_size=limit)
+        raw = decompress_bounded(data, limit)
         obj = json.loads(raw.decode("utf-8"))
     except (zstandard.ZstdError, UnicodeDecodeError, ValueError) as exc:
         raise BitstreamError(f"{what}: corrupt metadata ({exc})", frame) from exc

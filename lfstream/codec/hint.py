@@ -47,6 +47,7 @@ import cv2
 import numpy as np
 import zstandard
 
+from lfstream.codec.bitstream import decompress_bounded
 from lfstream.errors import BitstreamError, LFShapeError, LFValueError
 from lfstream.lightfield import check_lf, to_uint8, view_offsets
 
@@ -632,7 +633,7 @@ def _parse(data: bytes, size: tuple[int, int], frame: int | None, refs: dict[int
         if kind == KIND_REPEAT:
             return QuantisedHint(base.q, base.lo, base.hi, scale, axes)
     try:
-        raw = zstandard.ZstdDecompressor().decompress(body, max_output_size=hs * ws)
+        raw = decompress_bounded(body, hs * ws)
     except zstandard.ZstdError as exc:
         raise BitstreamError(f"depth hint: corrupt ({exc})", frame) from exc
     if len(raw) != hs * ws:

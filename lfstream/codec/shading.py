@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 import zstandard
 
+from lfstream.codec.bitstream import decompress_bounded
 from lfstream.errors import BitstreamError, LFValueError
 
 _HEADER = struct.Struct("<BBBBBB")
@@ -80,7 +81,7 @@ def decode_gains(data: bytes, views: tuple[int, int], frame: int | None = None) 
                              frame)
     n = u * v * gh * gw * ch
     try:
-        raw = zstandard.ZstdDecompressor().decompress(data[_HEADER.size :], max_output_size=n)
+        raw = decompress_bounded(data[_HEADER.size :], n)
     except zstandard.ZstdError as exc:
         raise BitstreamError(f"gain maps: corrupt ({exc})", frame) from exc
     if len(raw) != n:

@@ -120,3 +120,16 @@ def test_fuzz_mutations_never_crash_or_hang(stream):
     av1 = encode(synth_clip(2, 3, (32, 32), seed=3).lf, preset="balanced")  # version 2: an AV1 centre view
     counts = fuzz([stream, hinted, av1], 300, seed=2024)
     assert counts["decoded"] + counts["rejected"] == 300 and counts["rejected"] > 200  # CRCs catch nearly all
+
+
+def test_zstd_payloads_are_bounded_by_what_they_declare():
+    import zstandard
+
+    from lfstream.codec.bitstream import decompress_bounded
+
+    data = zstandard.ZstdCompressor(level=3).compress(bytes(4096))
+    assert decompress_bounded(data, 4096) == bytes(4096)
+    with pytest.raises(zstandard.ZstdError, match="declares 4096 bytes"):
+        decompress_bounded(data, 4095)
+    with pytest.raises(zstandard.ZstdError):
+        decompress_bounded(b"not zstd at all", 100)

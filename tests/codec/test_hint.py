@@ -231,3 +231,31 @@ def test_the_camera_array_sample_is_warped_along_its_own_axes():
     assert -1.12 < axes[0, 0] < -1.02 and -0.1 < axes[0, 1] < -0.02 and -0.1 < axes[1, 0] < -0.02
     # measured 17.53 dB with the axes, 11.87 with the convention
     assert mpsnr(lf, lfstream.decode(lfstream.encode(lf))[0]) > 16.5
+
+
+def test_damaged_version_3_payloads_decode_finite_or_fail_clearly():
+    hm = H.HintMap(np.linspace(-2, 3, 64, dtype=np.float32).reshape(8, 8), 4, (-2.0, 3.0),
+                   np.float32([[-1.07, -0.06], [-0.05, 1]]))
+    payload = H.encode_hint(hm)
+    assert payload[0] == H.HINT_VERSION_AXES
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        bad = bytearray(payload)
+        for pos in rng.integers(0, len(bad), size=rng.integers(1, 4)):
+            bad[pos] = int(rng.integers(0, 256))
+        try:
+            d, axes = H.HintDecoder().decode_with_axes(bytes(bad), (32, 32), frame=5)
+        except BitstreamError as exc:
+            assert "frame 5" in str(exc)
+            continue
+        assert np.isfinite(d).all() and (axes is None or (np.isfinite(axes).all() and np.abs(axes).max() <= 8))
+
+
+def test_a_payload_declaring_a_huge_size_is_refused_before_allocating():
+    # python-zstandard allocates the content size a frame declares, whatever max_output_size
+    # says: a hint for an 8x8 map whose body declares 1 MiB must fail without decoding it
+    hm = H.HintMap(np.zeros((8, 8), np.float32), 4, (0.0, 1.0))
+    head = H.encode_hint(hm)[:H._HEADER_V2.size]
+    body = zstandard.ZstdCompressor(level=9).compress(bytes(1 << 20))
+    with pytest.raises(BitstreamError, match="declares 1048576 bytes"):
+        H.decode_hint(head + body, (32, 32), frame=2)
