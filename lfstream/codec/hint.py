@@ -209,7 +209,7 @@ def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale:
 
 
 # view-axes detection (see the module docstring)
-_AXES_SCALE = 4  # the detection's resolution divisor; an accepted fit is refined at the sweep's
+_AXES_SCALE = 4  # the detection's resolution divisor; an accepted fit is refined at the sweep's working one
 _AXES_MAX_GAIN = 0.5  # the fit's mean flow residual must be below this share of the convention's
 _AXES_MIN_SHIFT = 0.25  # px of the full view a warped pixel must move for the axes to matter
 
@@ -325,7 +325,8 @@ def _detect_axes(grids: np.ndarray, steps: np.ndarray, use: list[int], work: int
     return fine if found else axes
 
 
-def estimate_view_axes(lf: np.ndarray, present: np.ndarray | None = None, work_scale: int = 2) -> np.ndarray:
+def estimate_view_axes(lf: np.ndarray, present: np.ndarray | None = None,
+                       work_scale: int = HintOptions.work_scale) -> np.ndarray:
     """The view axes of a light field (:func:`lfstream.lightfield.view_offsets`): the
     identity where it follows the convention, else the 2x2 matrix its views move along.
 
