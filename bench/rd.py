@@ -93,7 +93,7 @@ def rate_control_curve(lf: np.ndarray, quick: bool) -> list[dict]:
         header = split_stream(data)[0]
         p = _point(lf, data, rec, target, t_enc, t_dec)
         p.update({"target_bpp": target, "preset": header.meta.get("preset", "fast"), "quality": header.quality,
-                  "hint": header.has_hint})
+                  "hint": header.has_hint, "residual": header.meta.get("residual", {}).get("quality")})
         pts.append(p)
     return pts
 
@@ -169,11 +169,14 @@ def main(argv=None) -> dict:
     p = parser(__doc__)
     p.add_argument("--scenes", help="comma-separated scene names (default: all found)")
     p.add_argument("--png-dir", type=Path, default=ROOT / "bench" / "results")
+    p.add_argument("--skip-presets", action="store_true",
+                   help="leave out the fixed-preset lfstream curves (rate control and the baselines only)")
     args = p.parse_args(argv)
     only = set(args.scenes.split(",")) if args.scenes else None
     results = []
     for name, lf in scenes(args.quick, only):
-        curves = {f"lfstream {preset}": lfstream_curve(lf, preset, args.quick) for preset in PRESETS}
+        curves = {} if args.skip_presets else {f"lfstream {preset}": lfstream_curve(lf, preset, args.quick)
+                                               for preset in PRESETS}
         curves["lfstream --bpp (rate control)"] = rate_control_curve(lf, args.quick)
         for method, (codec, preset, params) in BASELINES.items():
             curves[method] = baseline_curve(lf, codec, preset, params)

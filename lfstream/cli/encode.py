@@ -23,6 +23,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       "preset (unless --preset), quality, hint and hint precision (best first-frame MPSNR within 15 %%)")
     p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG, the default), balanced "
                    "(AV1, SVT preset 12), best (AV1, SVT preset 8); with --bpp, the default is to try all three")
+    p.add_argument("--residual", type=int_in(QUALITY_RANGE), metavar="Q",
+                   help="quality 1..100 of the residual layer: every view's prediction "
+                   "error coded as one AV1 sequence "
+                   "(more bits, quality that keeps rising with rate; default: none, --bpp decides itself)")
     hint = p.add_mutually_exclusive_group()
     hint.add_argument("--depth-hint", dest="depth_hint", action="store_true", default=True,
                       help="send the encoder's disparity estimate (the default)")
@@ -44,25 +48,32 @@ def run(args: argparse.Namespace) -> int:
     frames = frames_of(loaded.lf)
     fps = args.fps or loaded.fps or 30.0
     quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
+    residual = args.residual
+    if args.bpp is not None and residual is not None:
+        from lfstream.errors import LFValueError
+
+        raise LFValueError("--residual: rate control (--bpp) chooses the residual layer itself; give one or the other")
     if args.bpp is not None:
         from lfstream.codec.rate import choose_configuration
 
         # rate control encodes every frame while it searches: its stream is written as it is
         t0 = time.perf_counter()
         rate = choose_configuration(frames, args.bpp, fps, loaded.present, preset=args.preset)
-        quality, depth_hint, preset = rate.quality, rate.depth_hint, rate.preset
+        quality, depth_hint, preset, residual = rate.quality, rate.depth_hint, rate.preset, rate.residual
         stats = write_stream_file(args.output, rate.header, rate.packets)
         stats.encode_s = time.perf_counter() - t0  # the search included
     else:
         stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]),
-                            Encoder(quality=quality, depth_hint=depth_hint, preset=preset), fps=fps, present=loaded.present)
+                            Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual), fps=fps,
+                            present=loaded.present)
     result = dataclasses.asdict(stats)
     result.update({"output": str(args.output), "bpp": bpp(stats.bytes, frames.shape),
                    "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": quality, "depth_hint": depth_hint,
-                   "preset": preset})
+                   "preset": preset, "residual": residual, "residual_bpp": bpp(stats.residual_bytes, frames.shape)})
     if rate is not None:
         result["rate_control"] = {"target_bpp": args.bpp, "candidates": list(rate.candidates)}
     emit(args, result, lambda r: f"{r['frames']} frame(s) -> {args.output}: {r['bytes']} bytes, {r['bpp']:.5f} bpp"
          + (f" (hint {r['hint_bpp']:.5f} bpp)" if depth_hint else "") + f", {preset} q{quality}"
+         + (f", residual q{residual} ({r['residual_bpp']:.5f} bpp)" if residual is not None else "")
          + f", encoded in {r['encode_s']:.3f} s")
     return 0

@@ -24,6 +24,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG, the default), balanced "
                    "or best (AV1); with --bpp, the default is to try all three")
     p.add_argument("--no-depth-hint", action="store_true", help="send only the centre view")
+    p.add_argument("--residual", type=int_in(QUALITY_RANGE), metavar="Q",
+                   help="quality 1..100 of the residual layer: every view's prediction "
+                   "error coded as one AV1 sequence "
+                   "(more bits, quality that keeps rising with rate; default: none, --bpp decides itself)")
     p.add_argument("--frames", type=int_in((1, 1 << 20)), default=12, help="frames of the built-in clip")
     _pipeline.add_pipeline_options(p)
     add_read_options(p)
@@ -48,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             source = file_source(args.input, read_options(args))
         cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp, depth_hint=not args.no_depth_hint,
-                                        preset=args.preset, transport=args.transport, fps=source.fps or 30.0)
+                                        preset=args.preset, residual=args.residual, transport=args.transport,
+                                        fps=source.fps or 30.0)
         pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
                         present=source.present)

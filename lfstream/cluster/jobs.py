@@ -28,18 +28,22 @@ class EncodeOptions:
     depth_hint: bool = True
     # the centre view's coding (lfstream.codec.encoder.PRESETS): fast = JPEG, balanced / best = AV1
     preset: str = "fast"
+    residual: int | None = None  # quality of the residual layer (lfstream.codec.residual); None: none
 
     def __post_init__(self) -> None:
         from lfstream.codec.encoder import PRESETS
+        from lfstream.codec.residual import check_residual_quality
 
         if self.preset not in PRESETS:
             raise LFValueError(f"preset: one of {', '.join(PRESETS)}, got {self.preset!r}")
+        if self.residual is not None:
+            check_residual_quality(self.residual)
 
     def encoder(self):
         """A fresh :class:`~lfstream.codec.encoder.Encoder` with these options."""
         from lfstream.codec.encoder import Encoder
 
-        return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset)
+        return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset, residual=self.residual)
 
 
 @dataclass(frozen=True)
@@ -69,7 +73,8 @@ def encode_group(frames: np.ndarray, start: int, fps: float, options: EncodeOpti
 
     t0 = time.perf_counter()
     enc = options.encoder()
-    packets = [pack_packet(enc.encode_frame(f, start + k, int(round((start + k) * 1e6 / fps)), present))
+    packets = [pack_packet(enc.encode_frame(f, start + k, int(round((start + k) * 1e6 / fps)), present),
+                           enc.stream_version)
                for k, f in enumerate(frames)]
     return GroupResult(start, packets=packets, seconds=time.perf_counter() - t0)
 

@@ -457,3 +457,79 @@ def joint_upsample(small, gsmall, guide, scale, lut, out):  # pragma: no cover -
     """
     for y in numba.prange(out.shape[0]):
         _jbu_row(small, gsmall, guide[y], scale, lut, y, out[y])
+
+
+
+# YCbCr -> RGB (BT.601 full range, the inverse of lfstream.codec.intra.rgb_to_i420) in
+# 14-bit fixed point, as OpenCV's 8-bit conversion does
+_YCC_BITS = 14
+_CR_R = int(round(1.403 * (1 << _YCC_BITS)))
+_CR_G = int(round(0.714 * (1 << _YCC_BITS)))
+_CB_G = int(round(0.344 * (1 << _YCC_BITS)))
+_CB_B = int(round(1.773 * (1 << _YCC_BITS)))
+
+
+@numba.njit(fastmath=True, cache=True, nogil=True, inline="always")
+def _add_level(dst_row, x, c, res, offset):  # pragma: no cover - compiled
+    """``dst_row[x, c] += clip(res, 0, 255) - offset``, saturated to 8 bits (branch-free:
+    random residual signs made the branches cost 2x)."""
+    dst_row[x, c] = np.uint8(_clip_u8(np.int32(dst_row[x, c]) + _clip_u8(res) - offset))
+
+
+@numba.njit(fastmath=True, cache=True, nogil=True, inline="always")
+def _clip_u8(v):  # pragma: no cover - compiled
+    """``clip(v, 0, 255)`` of an int32 without branches (arithmetic shifts of the sign)."""
+    v = v & ~(v >> np.int32(31))
+    return (v | ((np.int32(255) - v) >> np.int32(31))) & np.int32(255)
+
+
+@numba.njit(**_ROW)
+def _i420_residual_row(dst_row, flat, y, height, width, offset):  # pragma: no cover - compiled
+    """One row of ``dst += rgb(planes) - offset``. Chroma is up-sampled bilinearly with the
+    centre-aligned phase of 2x2 means (OpenCV's INTER_LINEAR resize): at 2x the taps are
+    always 3/4 and 1/4, so the whole interpolation is integer: (9a + 3b + 3c + d + 8) / 16.
+    ``flat``: PyAV's (3H/2, W) yuv420p layout flattened (H*W luma, then Cb, then Cr)."""
+    ch, cw = height // 2, width // 2
+    cb0 = height * width
+    cr0 = cb0 + ch * cw
+    m = y >> 1
+    if y & 1:  # output row 2m+1 sits between chroma rows m (3/4) and m+1 (1/4)
+        near, far = m, min(m + 1, ch - 1)
+    else:  # output row 2m: chroma rows m (3/4) and m-1 (1/4)
+        near, far = m, max(m - 1, 0)
+    near *= cw
+    far *= cw
+    half = np.int32(1 << (_YCC_BITS - 1))
+    # the vertical 3/4-1/4 blend once per chroma column, then two output pixels share it
+    vcb = np.empty(cw, np.int32)
+    vcr = np.empty(cw, np.int32)
+    for n in range(cw):
+        vcb[n] = 3 * np.int32(flat[cb0 + near + n]) + np.int32(flat[cb0 + far + n])
+        vcr[n] = 3 * np.int32(flat[cr0 + near + n]) + np.int32(flat[cr0 + far + n])
+    for x in range(dst_row.shape[0]):
+        n = x >> 1
+        o = min(n + 1, cw - 1) if x & 1 else max(n - 1, 0)  # column 2n+1: taps n, n+1; 2n: n, n-1
+        cb = ((3 * vcb[n] + vcb[o] + 8) >> 4) - 128
+        cr = ((3 * vcr[n] + vcr[o] + 8) >> 4) - 128
+        luma = np.int32(flat[y * width + x])
+        _add_level(dst_row, x, 0, luma + ((_CR_R * cr + half) >> _YCC_BITS), offset)
+        _add_level(dst_row, x, 1, luma + ((half - _CR_G * cr - _CB_G * cb) >> _YCC_BITS), offset)
+        _add_level(dst_row, x, 2, luma + ((_CB_B * cb + half) >> _YCC_BITS), offset)
+
+
+@numba.njit(**_PARALLEL)
+def add_i420_residual(lf, planes, positions, offset):  # pragma: no cover - compiled
+    """Adds decoded residual frames to their views, in place: view ``positions[n]`` of
+    ``lf`` gets ``rgb(planes[n]) - offset``, saturated to 8 bits.
+
+    Shapes: lf (U, V, H, W, 3) uint8; planes (N, 3 * PH / 2, PW) uint8 (PyAV's yuv420p
+    layout, PH, PW the even-padded size); positions (N, 2) int64; offset: int.
+    """
+    h = lf.shape[2]
+    ph = planes.shape[1] * 2 // 3
+    pw = planes.shape[2]
+    n = positions.shape[0]
+    for job in numba.prange(n * h):
+        k = job // h
+        y = job % h
+        _i420_residual_row(lf[positions[k, 0], positions[k, 1], y], planes[k].ravel(), y, ph, pw, np.int32(offset))

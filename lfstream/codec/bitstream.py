@@ -1,19 +1,21 @@
 """The ``.lfs`` bitstream: a file header, then one packet per light-field frame.
 
 Version 1 layout (all integers little-endian); version 2 is the same layout with one more
-centre-view codec (``codec`` 2: an AV1 key frame, :mod:`lfstream.codec.intra`). A writer
-stamps the lowest version that expresses its stream, so a JPEG stream is still version 1 and
-version-1 readers keep reading it; this reader reads both.
+centre-view codec (``codec`` 2: an AV1 key frame, :mod:`lfstream.codec.intra`); version 3
+adds the residual layer (:mod:`lfstream.codec.residual`): header flag bit 1 and one more
+length and payload per packet. A writer stamps the lowest version that expresses its
+stream, so a JPEG stream without a residual is still version 1 and version-1 readers keep
+reading it; this reader reads all three.
 
 File header::
 
     magic        4 bytes  b"\\x89LFS"
     version      u16      1
-    flags        u16      bit 0: packets may carry a depth hint
+    flags        u16      bit 0: packets may carry a depth hint; bit 1 (version 3): a residual layer
     views        u8, u8   U, V
     size         u16, u16 H, W
     fps_milli    u32      frame rate x 1000
-    codec        u8       centre view: 1 = JPEG (version 1 and 2), 2 = AV1 key frame (version 2)
+    codec        u8       centre view: 1 = JPEG (every version), 2 = AV1 key frame (version 2 and 3)
     quality      u8       centre-view quality 1..100 (JPEG quality; AV1: CRF 63..1)
     reserved     u16      0
     meta_len     u32      length of the metadata block
@@ -29,11 +31,13 @@ Packet (the unit every transport carries)::
     hint_len     u32      length of the depth hint (0: none)
     gain_len     u32      length of the per-view gain maps (0: none)
     meta_len     u32      length of the per-frame metadata (0: none)
+    residual_len u32      version 3 only: length of the residual layer (0: none)
     image        bytes
     hint         bytes    zstd-compressed quantised disparity (see :mod:`lfstream.codec.hint`)
     gain         bytes    per-view brightness gains (see :mod:`lfstream.codec.shading`)
     meta         bytes    zstd-compressed JSON
-    crc          u32      CRC32 of the packet from ``sync`` to the end of ``meta``
+    residual     bytes    version 3 only: the residual views (see :mod:`lfstream.codec.residual`)
+    crc          u32      CRC32 of the packet from ``sync`` to the end of the last payload
 
 A parser checks every length and dimension against :class:`Limits` before it allocates
 anything, checks CRCs, and names the frame in its errors. Reading a damaged file yields
@@ -57,17 +61,21 @@ from lfstream.lightfield import MAX_VIEW_SIDE, MAX_VIEWS_PER_AXIS
 
 MAGIC = b"\x89LFS"
 SYNC = b"LFPK"
-VERSION = 2  # the newest this module reads and writes; see stream_version()
-VERSIONS = (1, 2)
+VERSION = 3  # the newest this module reads and writes; see stream_version()
+VERSIONS = (1, 2, 3)
 CODEC_JPEG = 1
 CODEC_AV1 = 2
 CODEC_NAMES = {CODEC_JPEG: "jpeg", CODEC_AV1: "av1"}
 #: The centre-view codecs each version may carry.
-VERSION_CODECS = {1: (CODEC_JPEG,), 2: (CODEC_JPEG, CODEC_AV1)}
+VERSION_CODECS = {1: (CODEC_JPEG,), 2: (CODEC_JPEG, CODEC_AV1), 3: (CODEC_JPEG, CODEC_AV1)}
+#: The first version whose packets carry a residual layer.
+VERSION_RESIDUAL = 3
 FLAG_HINT = 1
+FLAG_RESIDUAL = 2
 
 _HEADER_FIXED = struct.Struct("<4sHHBBHHIBBHI")  # up to and including meta_len
 _PACKET_FIXED = struct.Struct("<4sIQIIII")
+_PACKET_FIXED_V3 = struct.Struct("<4sIQIIIII")  # + residual_len
 _CRC = struct.Struct("<I")
 
 
@@ -93,15 +101,22 @@ class StreamHeader:
     has_hint: bool = False
     codec: int = CODEC_JPEG
     meta: dict = field(default_factory=dict)
+    has_residual: bool = False
 
     @property
     def version(self) -> int:
         """The lowest format version that carries this stream (see :func:`stream_version`)."""
-        return stream_version(self.codec)
+        return stream_version(self.codec, self.has_residual)
 
     def max_payload(self, limits: Limits) -> int:
         h, w = self.size
         return int(limits.max_payload_factor * h * w * 3) + (1 << 20)
+
+    def max_residual(self, limits: Limits) -> int:
+        """A residual codes every view but the centre: its bound scales with the views."""
+        u, v = self.views
+        return min(int(limits.max_payload_factor * u * v * self.size[0] * self.size[1] * 3),
+                   limits.max_frame_bytes) + (1 << 20)
 
 
 @dataclass(frozen=True)
@@ -114,16 +129,25 @@ class Packet:
     hint: bytes = b""
     gain: bytes = b""
     meta: bytes = b""
+    residual: bytes = b""
+
+    def size(self, version: int) -> int:
+        """Bytes this packet takes in a stream of ``version``."""
+        fixed = _PACKET_FIXED_V3 if version >= VERSION_RESIDUAL else _PACKET_FIXED
+        return (fixed.size + len(self.image) + len(self.hint) + len(self.gain) + len(self.meta) + len(self.residual)
+                + _CRC.size)
 
     @property
     def nbytes(self) -> int:
-        return _PACKET_FIXED.size + len(self.image) + len(self.hint) + len(self.gain) + len(self.meta) + _CRC.size
+        """Bytes in the lowest version that carries it (3 with a residual, else 1 or 2)."""
+        return self.size(VERSION_RESIDUAL if self.residual else 1)
 
 
-def stream_version(codec: int) -> int:
-    """The lowest ``.lfs`` version that can carry a centre view in ``codec``."""
+def stream_version(codec: int, residual: bool = False) -> int:
+    """The lowest ``.lfs`` version that can carry a centre view in ``codec`` (and, with
+    ``residual``, a residual layer)."""
     for version in VERSIONS:
-        if codec in VERSION_CODECS[version]:
+        if codec in VERSION_CODECS[version] and (not residual or version >= VERSION_RESIDUAL):
             return version
     raise BitstreamError(f"header: unknown codec id {codec}")
 
@@ -185,18 +209,26 @@ def pack_header(header: StreamHeader) -> bytes:
     check_header_values(header)
     meta = _compress_json(header.meta)
     fixed = _HEADER_FIXED.pack(
-        MAGIC, header.version, FLAG_HINT if header.has_hint else 0, header.views[0], header.views[1],
+        MAGIC, header.version, (FLAG_HINT if header.has_hint else 0) | (FLAG_RESIDUAL if header.has_residual else 0),
+        header.views[0], header.views[1],
         header.size[0], header.size[1], int(round(header.fps * 1000)), header.codec, header.quality, 0, len(meta),
     )
     body = fixed + meta
     return body + _CRC.pack(zlib.crc32(body))
 
 
-def pack_packet(packet: Packet) -> bytes:
+def pack_packet(packet: Packet, version: int = 1) -> bytes:
+    """A packet's bytes in a stream of ``version`` (the header's :attr:`StreamHeader.version`)."""
     if packet.seq < 0 or packet.seq >= 1 << 32 or packet.timestamp_us < 0:
         raise LFValueError(f"packet: sequence number or timestamp out of range ({packet.seq}, {packet.timestamp_us})")
-    body = _PACKET_FIXED.pack(SYNC, packet.seq, packet.timestamp_us, len(packet.image), len(packet.hint),
-                              len(packet.gain), len(packet.meta)) + packet.image + packet.hint + packet.gain + packet.meta
+    lengths = (len(packet.image), len(packet.hint), len(packet.gain), len(packet.meta))
+    if version >= VERSION_RESIDUAL:
+        fixed = _PACKET_FIXED_V3.pack(SYNC, packet.seq, packet.timestamp_us, *lengths, len(packet.residual))
+    elif packet.residual:
+        raise LFValueError(f"packet {packet.seq}: a residual layer needs a version-{VERSION_RESIDUAL} stream")
+    else:
+        fixed = _PACKET_FIXED.pack(SYNC, packet.seq, packet.timestamp_us, *lengths)
+    body = fixed + packet.image + packet.hint + packet.gain + packet.meta + packet.residual
     return body + _CRC.pack(zlib.crc32(body))
 
 
@@ -217,6 +249,10 @@ def read_header(fh: BinaryIO, limits: Limits = Limits()) -> StreamHeader:
         raise BitstreamError(f"header: unsupported version {version} (this reader knows {', '.join(map(str, VERSIONS))})")
     if codec not in VERSION_CODECS[version]:
         raise BitstreamError(f"header: codec id {codec} is not part of version {version}")
+    if bool(flags & FLAG_RESIDUAL) != (version >= VERSION_RESIDUAL):
+        # writers stamp the lowest version: version 3 exactly when there is a residual layer
+        raise BitstreamError(f"header: residual flag {'set' if flags & FLAG_RESIDUAL else 'clear'} in a "
+                             f"version-{version} stream")
     if meta_len > limits.max_meta_bytes:
         raise BitstreamError(f"header: metadata length {meta_len} exceeds {limits.max_meta_bytes}")
     meta = _read_exact(fh, meta_len)
@@ -226,7 +262,7 @@ def read_header(fh: BinaryIO, limits: Limits = Limits()) -> StreamHeader:
     if _CRC.unpack(crc)[0] != zlib.crc32(fixed + meta):
         raise BitstreamError("header: CRC mismatch")
     header = StreamHeader(views=(u, v), size=(h, w), fps=fps_milli / 1000.0, quality=quality,
-                          has_hint=bool(flags & FLAG_HINT), codec=codec,
+                          has_hint=bool(flags & FLAG_HINT), codec=codec, has_residual=bool(flags & FLAG_RESIDUAL),
                           meta=_decompress_json(meta, limits.max_meta_bytes, "header"))
     check_header_values(header, limits)
     return header
@@ -239,12 +275,14 @@ def read_packet(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits(), e
         BitstreamError: truncated packet, bad sync, lengths over the limits, CRC mismatch.
     """
     frame = expect_seq
-    fixed = _read_exact(fh, _PACKET_FIXED.size)
+    layout = _PACKET_FIXED_V3 if header.has_residual else _PACKET_FIXED
+    fixed = _read_exact(fh, layout.size)
     if not fixed:
         return None
-    if len(fixed) < _PACKET_FIXED.size:
-        raise BitstreamError(f"truncated packet header ({len(fixed)} of {_PACKET_FIXED.size} bytes)", frame)
-    sync, seq, ts, image_len, hint_len, gain_len, meta_len = _PACKET_FIXED.unpack(fixed)
+    if len(fixed) < layout.size:
+        raise BitstreamError(f"truncated packet header ({len(fixed)} of {layout.size} bytes)", frame)
+    sync, seq, ts, image_len, hint_len, gain_len, meta_len, *rest = layout.unpack(fixed)
+    residual_len = rest[0] if rest else 0
     if sync != SYNC:
         raise BitstreamError("bad packet sync marker (corrupt or not a packet boundary)", frame)
     frame = seq if expect_seq is None else expect_seq
@@ -255,7 +293,9 @@ def read_packet(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits(), e
         raise BitstreamError(f"hint or gain length ({hint_len}, {gain_len}) exceeds {cap}", frame)
     if meta_len > limits.max_meta_bytes:
         raise BitstreamError(f"metadata length {meta_len} exceeds {limits.max_meta_bytes}", frame)
-    total = image_len + hint_len + gain_len + meta_len
+    if residual_len > header.max_residual(limits):
+        raise BitstreamError(f"residual length {residual_len} exceeds {header.max_residual(limits)}", frame)
+    total = image_len + hint_len + gain_len + meta_len + residual_len
     body = _read_exact(fh, total)
     crc = _read_exact(fh, _CRC.size)
     if len(body) < total or len(crc) < _CRC.size:
@@ -263,7 +303,9 @@ def read_packet(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits(), e
     if _CRC.unpack(crc)[0] != zlib.crc32(fixed + body):
         raise BitstreamError("CRC mismatch", frame)
     a, b, c = image_len, image_len + hint_len, image_len + hint_len + gain_len
-    return Packet(seq=seq, timestamp_us=ts, image=body[:a], hint=body[a:b], gain=body[b:c], meta=body[c:])
+    d = c + meta_len
+    return Packet(seq=seq, timestamp_us=ts, image=body[:a], hint=body[a:b], gain=body[b:c], meta=body[c:d],
+                  residual=body[d:])
 
 
 def iter_packets(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits()) -> Iterator[Packet]:
@@ -295,7 +337,7 @@ class StreamWriter:
         self.bytes_written += len(data)
 
     def write(self, packet: Packet) -> int:
-        data = pack_packet(packet)
+        data = pack_packet(packet, self.header.version)
         self._write(data)
         return len(data)
 

@@ -2,7 +2,8 @@
 frame — from the hint (``depth="hint"``), zero (``depth="flat"``: every view is the centre
 view) or Depth-Net's per-view maps (``depth="net"``) — and the backward warp of the centre
 view into every view with occlusion handling (:mod:`lfstream.codec.warp`), then the
-per-view shading gains. The networks are pluggable stages with the shipped ``fast``
+per-view shading gains, and the residual layer where the stream has one (added only to the
+prediction it was computed against). The networks are pluggable stages with the shipped ``fast``
 weights; ``hance="off"`` and ``depth="flat"``/``"hint"`` are the non-learned fallbacks.
 """
 
@@ -19,6 +20,7 @@ import numpy as np
 from lfstream.codec.bitstream import CODEC_JPEG, Limits, Packet, StreamHeader, iter_packets, read_header
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
+from lfstream.codec.residual import apply_residual
 from lfstream.codec.shading import apply_gains, decode_gains
 from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.errors import BitstreamError, LFFileError, LFValueError
@@ -79,8 +81,10 @@ class Decoder:
         self.device = check_device(self.device)
         if self.depth == "hint" and not self.header.has_hint:
             raise LFValueError("depth='hint': this stream carries no depth hint (encode with depth_hint=True)")
-        # JPEG-Hance is trained on JPEG artefacts: "auto" never runs it on an AV1 centre view
+        # JPEG-Hance is trained on JPEG artefacts: "auto" never runs it on an AV1 centre view,
+        # nor where a residual layer corrects the prediction without it
         use_hance = self.hance == "on" or (self.hance == "auto" and self.header.codec == CODEC_JPEG
+                                           and not self.header.has_residual
                                            and self.header.quality <= HANCE_MAX_QUALITY.get(self.preset, 0))
         self._hance = None
         if use_hance:  # torch is imported only when a network runs
@@ -91,6 +95,7 @@ class Decoder:
         self._last_disparity: np.ndarray | None = None
         self._last_axes: np.ndarray | None = None
         self.hint_fallbacks = 0  # delta hints whose reference frame never arrived
+        self.residual_skipped = 0  # residual layers not applied: this decoder's prediction is not their reference
         self._depth_net = None
         if self.depth == "net":
             from lfstream.models.registry import load_model
@@ -103,6 +108,16 @@ class Decoder:
     @property
     def uses_hance(self) -> bool:
         return self._hance is not None
+
+    @property
+    def applies_residual(self) -> bool:
+        """Whether a residual layer is added: only to the prediction the encoder computed it
+        against — the hint's warp (the flat one for a stream without a hint), occlusion-aware,
+        with the gains, without JPEG-Hance. ``depth="flat"``/``"net"`` or ``hance="on"`` decode
+        the prediction alone (counted in :attr:`residual_skipped`)."""
+        reference_depth = "hint" if self.header.has_hint else "flat"
+        return (self.header.has_residual and self.depth in ("auto", reference_depth) and self.occlusion
+                and self._hance is None)
 
     def decode_packet(self, packet: Packet) -> DecodedFrame:
         return self.decode_batch([packet])[0]
@@ -128,14 +143,23 @@ class Decoder:
     def reconstruct(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray) -> DecodedFrame:
         """Warps a decoded centre view by a given centre-view disparity (occlusion-aware) and
         applies the packet's shading gains; also serves callers that reuse a disparity (the
-        packet's hint is still read, so later delta hints can refer to it)."""
+        packet's hint is still read, so later delta hints can refer to it). A residual layer
+        is added too: with a reused disparity the result differs from a full decode by what
+        the two predictions differ (the stream's static skip audits that)."""
         axes = self._last_axes
         if packet.hint and self.estimates_depth:
             try:
                 axes = self._last_axes = self._hints.parse(packet.hint, self.header.size, packet.seq).axes
             except HintReferenceError:
                 self.hint_fallbacks += 1
-        return self._warp(packet, centre, disparity, axes)
+        return self._add_residual(packet, self._warp(packet, centre, disparity, axes))
+
+    def _add_residual(self, packet: Packet, frame: DecodedFrame) -> DecodedFrame:
+        if packet.residual and self.applies_residual:
+            apply_residual(frame.lf, packet.residual, packet.seq)
+        elif packet.residual:
+            self.residual_skipped += 1
+        return frame
 
     def _hint_disparity(self, packet: Packet, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """The packet's hint, decoded, and its view axes; where it is a delta to a frame that
@@ -185,8 +209,9 @@ class Decoder:
             hints.append(d)
             axes.append(a)
         if self._depth_net is None:
-            return [self._warp(p, centre, hint if hint is not None else np.zeros((h, w), np.float32), a)
+            return [self._add_residual(p, self._warp(p, centre, hint if hint is not None else np.zeros((h, w), np.float32), a))
                     for p, centre, hint, a in zip(packets, centres, hints, axes)]
+        self.residual_skipped += sum(1 for p in packets if p.residual)
         from lfstream.models.depth_net import predict_view_disparities
 
         stacked = np.stack(hints) if self._depth_net.config.hint else None

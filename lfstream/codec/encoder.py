@@ -1,7 +1,9 @@
 """The encoder (seed chapter 3): per frame, the centre view as a JPEG (or, in the
 ``balanced`` and ``best`` presets, an AV1 key frame: :mod:`lfstream.codec.intra`); with the
 depth hint also the centre view's disparity (:mod:`lfstream.codec.hint`); per-view shading
-gains where the views differ in brightness (:mod:`lfstream.codec.shading`).
+gains where the views differ in brightness (:mod:`lfstream.codec.shading`); optionally the
+residual layer, what the decoder's prediction misses in every other view
+(:mod:`lfstream.codec.residual`).
 
 Determinism: the same input and options give the same bytes (OpenCV's JPEG encoder,
 fixed zstd levels, sorted JSON metadata).
@@ -18,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter
+from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_version
 from lfstream.codec.hint import HintOptions, HintTracker
 from lfstream.codec.intra import CentreCoding, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE
@@ -39,6 +41,9 @@ PRESETS: dict[str, CentreCoding] = {
     "best": CentreCoding("av1", speed=8),
 }
 DEFAULT_PRESET = "fast"
+#: SVT-AV1 preset of the residual layer per preset: ``best`` spends the time (measured on
+#: lytro_bikes: preset 8 gives 0.4-0.8 dB more than 12 at equal bytes, for 2x the time).
+RESIDUAL_SPEED = {"fast": 12, "balanced": 12, "best": 8}
 
 
 def preset_coding(preset: str) -> CentreCoding:
@@ -58,6 +63,9 @@ class Encoder:
         hint_options: plane-sweep and coding options of the hint.
         preset: the centre view's coding (:data:`PRESETS`: ``fast`` JPEG, ``balanced`` and
             ``best`` AV1).
+        residual: quality (1..100) of the residual layer, ``None`` for none. The encoder
+            then runs the decoder's prediction on every frame (it costs a decode and an AV1
+            sequence encode: 150-600 ms a 7x7x375x540 frame).
     """
 
     quality: int = 50
@@ -65,9 +73,15 @@ class Encoder:
     hint_options: HintOptions = field(default_factory=HintOptions)
     gain_grid: int = 4  # per-view brightness gains on a grid x grid mesh; 0 sends none
     preset: str = DEFAULT_PRESET
+    residual: int | None = None
 
     def __post_init__(self) -> None:
         self.coding = preset_coding(self.preset)
+        if self.residual is not None:
+            from lfstream.codec.residual import check_residual_quality
+
+            check_residual_quality(self.residual)
+        self._reference = None  # the decoder whose prediction the residual corrects
         lo, hi = QUALITY_RANGE
         if not isinstance(self.quality, (int, np.integer)) or not lo <= self.quality <= hi:
             raise LFValueError(f"quality: an integer in {lo}..{hi}, got {self.quality!r}")
@@ -85,8 +99,15 @@ class Encoder:
             meta["centre"] = self.coding.as_meta(self.quality)
         if self.depth_hint:
             meta["hint"] = self.hint_options.as_meta()
+        if self.residual is not None:
+            meta["residual"] = {"codec": "av1", "quality": int(self.residual), "svt_preset": RESIDUAL_SPEED[self.preset]}
         return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint,
-                            codec=self.coding.codec_id, meta=meta)
+                            codec=self.coding.codec_id, meta=meta, has_residual=self.residual is not None)
+
+    @property
+    def stream_version(self) -> int:
+        """The ``.lfs`` version of this encoder's streams."""
+        return stream_version(self.coding.codec_id, self.residual is not None)
 
     def encode_frame(self, lf: np.ndarray, seq: int, timestamp_us: int, present: np.ndarray | None = None) -> Packet:
         """One ``(U, V, H, W, 3)`` frame (uint8, or float in [0, 1]) to a packet.
@@ -113,7 +134,33 @@ class Encoder:
         if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1:
             gains = measure_gains(frame, self.gain_grid, present=present)
             gain = encode_gains(gains) if shading_present(gains) else b""
-        return Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
+        packet = Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
+        if self.residual is not None and frame.shape[0] * frame.shape[1] > 1:
+            packet = self.add_residual(packet, frame, self.residual)
+        return packet
+
+    def predict(self, packet: Packet, views: tuple[int, int], size: tuple[int, int]) -> np.ndarray:
+        """What the decoder reconstructs from ``packet`` before any residual: the reference
+        prediction (:attr:`lfstream.codec.decoder.Decoder.applies_residual`). Packets must
+        come in stream order (delta hints refer to earlier frames).
+
+        Shape:
+            - output: ``(U, V, H, W, 3)`` uint8
+        """
+        if self._reference is None:
+            from lfstream.codec.decoder import Decoder
+
+            self._reference = Decoder(self.header(views, size, 30.0), depth="auto", hance="off")
+        return self._reference.decode_packet(packet).lf
+
+    def add_residual(self, packet: Packet, frame: np.ndarray, quality: int) -> Packet:
+        """``packet`` with a residual layer at ``quality`` against its prediction."""
+        from dataclasses import replace
+
+        from lfstream.codec.residual import encode_residual
+
+        prediction = self.predict(packet, frame.shape[:2], frame.shape[2:4])
+        return replace(packet, residual=encode_residual(frame, prediction, quality, RESIDUAL_SPEED[self.preset]))
 
 
 @dataclass
@@ -124,12 +171,14 @@ class EncodeStats:
     bytes: int = 0
     image_bytes: int = 0
     hint_bytes: int = 0
+    residual_bytes: int = 0
     encode_s: float = 0.0
 
     def add(self, packet: Packet, seconds: float) -> None:
         self.frames += 1
         self.image_bytes += len(packet.image)
         self.hint_bytes += len(packet.hint)
+        self.residual_bytes += len(packet.residual)
         self.encode_s += seconds
 
 
@@ -149,6 +198,7 @@ def encode(
     present: np.ndarray | None = None,
     bpp: float | None = None,
     preset: str | None = None,
+    residual: int | None = None,
 ) -> bytes:
     """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
 
@@ -156,8 +206,10 @@ def encode(
     views (the centre view must exist); the decoder reconstructs all views. ``bpp``: a
     target size in bits per pixel instead of ``quality`` and ``depth_hint``: rate control
     (:mod:`lfstream.codec.rate`) picks the quality, whether to send the hint and, unless
-    ``preset`` names one, the preset. ``preset``: the centre view's coding (:data:`PRESETS`;
-    default ``fast``, the seed's JPEG).
+    ``preset`` names one, the preset, and whether and how well to code the residual layer.
+    ``preset``: the centre view's coding (:data:`PRESETS`; default ``fast``, the seed's
+    JPEG). ``residual``: quality 1..100 of the residual layer (:mod:`lfstream.codec.residual`),
+    ``None`` (the default) for none.
 
     Raises:
         LFStreamError: bad shape, dtype, non-finite values or parameters.
@@ -171,10 +223,12 @@ def encode(
     if bpp is not None:
         from lfstream.codec.rate import choose_configuration
 
+        if residual is not None:
+            raise LFValueError("residual: rate control (bpp) chooses the residual layer itself; give one or the other")
         # rate control encoded every frame already: its stream is the answer
         return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream()
     enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid,
-                  preset=preset or DEFAULT_PRESET)
+                  preset=preset or DEFAULT_PRESET, residual=residual)
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
     for t, frame in enumerate(frames):

@@ -68,7 +68,7 @@ def av1_crf(quality: int) -> int:
     return int(round(63 - (quality - 1) * 62 / 99))
 
 
-def _rgb_to_i420(img: np.ndarray) -> np.ndarray:
+def rgb_to_i420(img: np.ndarray) -> np.ndarray:
     """RGB (even sizes) to planar 4:2:0 in PyAV's ``(3H/2, W)`` layout: BT.601 full range
     (the decoder inverts the same matrix: no range squeeze), chroma by 2x2 means.
 
@@ -82,8 +82,8 @@ def _rgb_to_i420(img: np.ndarray) -> np.ndarray:
     return np.concatenate([ycc[..., 0].ravel(), cb.ravel(), cr.ravel()]).reshape(h * 3 // 2, w)
 
 
-def _i420_to_rgb(planes: np.ndarray) -> np.ndarray:
-    """The inverse of :func:`_rgb_to_i420`: chroma up-sampled bilinearly (centre-aligned,
+def i420_to_rgb(planes: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`rgb_to_i420`: chroma up-sampled bilinearly (centre-aligned,
     the phase of the 2x2 means)."""
     h, w = planes.shape[0] * 2 // 3, planes.shape[1]
     flat = planes.ravel()
@@ -107,7 +107,7 @@ def encode_av1(img: np.ndarray, quality: int, speed: int = 12) -> bytes:
     ph, pw = h + h % 2, w + w % 2
     if (ph, pw) != (h, w):
         img = np.pad(img, ((0, ph - h), (0, pw - w), (0, 0)), mode="edge")
-    i420 = _rgb_to_i420(img)
+    i420 = rgb_to_i420(img)
     ctx = av.CodecContext.create("libsvtav1", "w")
     ctx.width, ctx.height, ctx.pix_fmt = pw, ph, "yuv420p"
     ctx.time_base = Fraction(1, 25)
@@ -135,7 +135,7 @@ def decode_av1(data: bytes, size: tuple[int, int], frame: int | None = None) -> 
     f = frames[0]
     if f.format.name != "yuv420p" or (f.height, f.width) != (h + h % 2, w + w % 2):
         raise BitstreamError(f"centre view is {f.height}x{f.width} {f.format.name}, header says {h}x{w}", frame)
-    return _i420_to_rgb(f.to_ndarray(format="yuv420p"))[:h, :w]
+    return i420_to_rgb(f.to_ndarray(format="yuv420p"))[:h, :w]
 
 
 def encode_centre(img: np.ndarray, quality: int, coding: CentreCoding) -> bytes:
@@ -154,5 +154,5 @@ def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int 
     raise BitstreamError(f"unknown centre-view codec id {codec_id}", frame)
 
 
-__all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "CentreCoding", "av1_crf",
+__all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb",
            "encode_av1", "decode_av1", "encode_centre", "decode_centre"]

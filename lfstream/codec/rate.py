@@ -7,6 +7,11 @@ one centre-view encode per frame, and a bisection finds, for every preset with t
 without it, the quality whose stream is closest to the target. The candidates are decoded
 on the first frame and the one with the higher MPSNR (over the views that exist) wins: the
 encoder has the whole light field, so it can measure instead of guess.
+
+The residual layer (:mod:`lfstream.codec.residual`) is a candidate too: the centre view takes
+a share of the target (:data:`RESIDUAL_SHARES`), the residual's quality is bisected to fill
+the rest. Measured on lytro_bikes at 0.08 bpp, a centre view at about half the budget was
+best (35.1 dB; a quarter 34.8, two thirds 35.0, nine tenths 34.1).
 """
 
 from __future__ import annotations
@@ -27,6 +32,11 @@ RATE_TOLERANCE = 0.15
 #: The second hint precision rate control tries (the default sends 1/4 resolution): at low
 #: rates a 1/8 map costs a third of the bytes for 0.1-0.3 dB (measured on the shared samples).
 COARSE_HINT_SCALE = 8
+#: Shares of the target the centre view (with hint and gains) takes in residual candidates.
+RESIDUAL_SHARES = (0.35, 0.55)
+#: The preset of residual candidates when rate control may choose (AV1 centre and residual
+#: at SVT-AV1 preset 8: the best measured quality per byte).
+RESIDUAL_PRESET = "best"
 
 
 @dataclass(frozen=True)
@@ -43,10 +53,11 @@ class RateChoice:
     packets: tuple[Packet, ...]
     preset: str = "fast"
     hint_options: HintOptions = HintOptions()  # the chosen hint's options (the default without a hint)
+    residual: int | None = None  # the residual layer's quality; None: no residual
 
     def stream(self) -> bytes:
         """The chosen ``.lfs`` stream."""
-        return pack_header(self.header) + b"".join(pack_packet(p) for p in self.packets)
+        return pack_header(self.header) + b"".join(pack_packet(p, self.header.version) for p in self.packets)
 
 
 def _at_quality(header: StreamHeader, packets: list[Packet], quality: int, images: list[bytes],
@@ -60,6 +71,19 @@ def _at_quality(header: StreamHeader, packets: list[Packet], quality: int, image
     return at_q, [replace(p, image=img) for p, img in zip(packets, images)]
 
 
+def _bisect_quality(size, target_bytes: float) -> tuple[int, int]:
+    """The bracket ``(lo, hi)`` of qualities around ``target_bytes`` by bisection over
+    :data:`QUALITY_RANGE` (``size(q)`` grows with ``q``; it caches what it encodes)."""
+    lo, hi = QUALITY_RANGE
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if size(mid) <= target_bytes:
+            lo = mid
+        else:
+            hi = mid
+    return lo, hi
+
+
 def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeader, target_bytes: float,
                   coding: CentreCoding) -> tuple[int, int, list[bytes]]:
     """The quality whose stream is closest to ``target_bytes`` (bisection; sizes grow with
@@ -71,27 +95,55 @@ def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeade
         if q not in cache:
             images = [encode_centre(c, q, coding) for c in centres]
             at_q, moved = _at_quality(header, packets, q, images, coding)
-            cache[q] = (len(pack_header(at_q)) + sum(p.nbytes for p in moved), images)
+            cache[q] = (len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved), images)
         return cache[q][0]
 
-    lo, hi = QUALITY_RANGE
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if size(mid) <= target_bytes:
-            lo = mid
-        else:
-            hi = mid
-    q = min((lo, hi), key=lambda k: abs(size(k) - target_bytes))
+    q = min(_bisect_quality(size, target_bytes), key=lambda k: abs(size(k) - target_bytes))
     return q, size(q), cache[q][1]
+
+
+def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: StreamHeader, quality: int,
+                        images: list[bytes], coding: CentreCoding, preset: str, opts: HintOptions,
+                        gain_grid: int, target_bytes: float) -> tuple[int, StreamHeader, list[Packet]] | None:
+    """The residual quality whose stream (centre at ``quality``) is closest to the target
+    without passing it by more than :data:`RATE_TOLERANCE`; ``None`` when even quality 1
+    does not fit."""
+    from lfstream.codec.encoder import RESIDUAL_SPEED, Encoder
+    from lfstream.codec.residual import encode_residual
+
+    at_q, moved = _at_quality(header, packets, quality, images, coding)
+    ref = Encoder(quality=quality, depth_hint=header.has_hint, hint_options=opts, gain_grid=gain_grid, preset=preset,
+                  residual=1)
+    u, v, h, w = frames.shape[1:5]
+    predictions = [ref.predict(p, (u, v), (h, w)) for p in moved]  # in stream order: delta hints
+    frames8 = [to_uint8(f) for f in frames]
+    base = len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved)
+    cache: dict[int, tuple[int, list[bytes]]] = {}
+
+    def size(r: int) -> int:
+        if r not in cache:
+            payloads = [encode_residual(f, pred, r, RESIDUAL_SPEED[preset]) for f, pred in zip(frames8, predictions)]
+            cache[r] = (base + sum(len(x) for x in payloads), payloads)
+        return cache[r][0]
+
+    if size(QUALITY_RANGE[0]) > target_bytes * (1 + RATE_TOLERANCE):
+        return None
+    fits = [r for r in _bisect_quality(size, target_bytes) if size(r) <= target_bytes * (1 + RATE_TOLERANCE)]
+    r = min(fits, key=lambda k: abs(size(k) - target_bytes))
+    meta = {**at_q.meta, "residual": {"codec": "av1", "quality": r, "svt_preset": RESIDUAL_SPEED[preset]}}
+    with_res = replace(at_q, meta=meta)
+    return r, with_res, [replace(p, residual=x) for p, x in zip(moved, cache[r][1])]
 
 
 def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, present: np.ndarray | None = None,
                          hint_options: HintOptions | None = None, gain_grid: int = 4,
-                         preset: str | None = None) -> RateChoice:
-    """The (preset, quality, depth hint, hint precision) whose stream lands nearest
+                         preset: str | None = None, residual: bool = True) -> RateChoice:
+    """The (preset, quality, depth hint, hint precision, residual) whose stream lands nearest
     ``target_bpp`` with the best first-frame MPSNR (see the module docstring). ``preset``:
-    the only preset to consider; ``None`` considers every preset. ``hint_options``: the only
-    hint options to consider; ``None`` tries the default and a 1/8-resolution hint.
+    the only preset to consider; ``None`` considers every preset (and the residual layer
+    with :data:`RESIDUAL_PRESET`). ``hint_options``: the only hint options to consider;
+    ``None`` tries the default and a 1/8-resolution hint. ``residual``: whether residual
+    candidates are tried (they cost a decode and several AV1 sequence encodes per frame).
 
     Shape:
         - frames: ``(T, U, V, H, W, 3)``
@@ -108,6 +160,11 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     pixels = int(np.prod(frames.shape[:5]))
     target_bytes = target_bpp * pixels / 8.0
     candidates = []
+
+    def measure(at_q: StreamHeader, moved: list[Packet]) -> float:
+        first = pack_header(at_q) + pack_packet(moved[0], at_q.version)  # the first frame is a key frame
+        return float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
+
     hints = [hint_options] if hint_options is not None else [HintOptions(), HintOptions(hint_scale=COARSE_HINT_SCALE)]
     for hint, opts in [(True, h) for h in hints] + [(False, HintOptions())]:
         # hints and gains do not depend on the preset: one encode per frame, the centre
@@ -119,11 +176,28 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
             header = enc_p.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
             q, n, images = _best_quality(frames, packets, header, target_bytes, enc_p.coding)
             at_q, moved = _at_quality(header, packets, q, images, enc_p.coding)
-            first = pack_header(at_q) + pack_packet(moved[0])  # the first frame is a key frame: it decodes alone
-            score = float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
             candidates.append({"preset": name, "quality": q, "depth_hint": hint,
-                               "hint_scale": opts.hint_scale if hint else None, "bpp": bpp(n, frames.shape),
-                               "mpsnr_first_frame": score, "_stream": (at_q, tuple(moved), opts)})
+                               "hint_scale": opts.hint_scale if hint else None, "residual": None,
+                               "bpp": bpp(n, frames.shape), "mpsnr_first_frame": measure(at_q, moved),
+                               "_stream": (at_q, tuple(moved), opts)})
+        res_preset = RESIDUAL_PRESET if preset is None else preset
+        if not (residual and hint and opts.hint_scale == HintOptions().hint_scale and frames.shape[1] * frames.shape[2] > 1):
+            continue
+        enc_r = Encoder(quality=50, depth_hint=True, hint_options=opts, gain_grid=gain_grid, preset=res_preset,
+                        residual=1)
+        header_r = enc_r.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
+        for share in RESIDUAL_SHARES:
+            q, n, images = _best_quality(frames, packets, header_r, share * target_bytes, enc_r.coding)
+            found = _residual_candidate(frames, packets, header_r, q, images, enc_r.coding, res_preset, opts,
+                                        gain_grid, target_bytes)
+            if found is None:
+                continue
+            r, at_q, moved = found
+            n = len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved)
+            candidates.append({"preset": res_preset, "quality": q, "depth_hint": True, "hint_scale": opts.hint_scale,
+                               "residual": r, "bpp": bpp(n, frames.shape), "mpsnr_first_frame": measure(at_q, moved),
+                               "_stream": (at_q, tuple(moved), opts)})
+
     # within the tolerance where possible, then the better measured quality
     def rank(c: dict) -> tuple:
         off = abs(c["bpp"] - target_bpp) / target_bpp
@@ -133,7 +207,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     header_q, packets_q, opts_q = best["_stream"]
     report = tuple({k: v for k, v in c.items() if k != "_stream"} for c in candidates)
     return RateChoice(best["quality"], best["depth_hint"], best["bpp"], best["mpsnr_first_frame"], report, header_q,
-                      packets_q, best["preset"], opts_q)
+                      packets_q, best["preset"], opts_q, best["residual"])
 
 
-__all__ = ["RATE_TOLERANCE", "COARSE_HINT_SCALE", "RateChoice", "choose_configuration"]
+__all__ = ["RATE_TOLERANCE", "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "RateChoice", "choose_configuration"]

@@ -52,6 +52,9 @@ class StreamConfig:
     # the centre view's coding (lfstream.codec.encoder.PRESETS); None: "fast", or with bpp
     # every preset is a rate-control candidate
     preset: str | None = None
+    # quality of the residual layer (lfstream.codec.residual); None: none (with bpp, rate
+    # control decides)
+    residual: int | None = None
     depth: str = "auto"
     hance: str = "auto"
     refocus: str = "auto"
@@ -80,7 +83,8 @@ class StreamConfig:
 
     def encoder(self) -> Encoder:
         """The encoder these fields describe (before rate control, which picks its own)."""
-        return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset or DEFAULT_PRESET)
+        return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset or DEFAULT_PRESET,
+                       residual=self.residual)
 
     def validate(self) -> None:
         """Raises :class:`LFValueError` naming the first field out of its range."""
@@ -89,6 +93,10 @@ class StreamConfig:
             check_range("bpp", self.bpp, (1e-5, 24.0), integer=False)
         if self.preset is not None:
             check_choice("preset", self.preset, tuple(PRESETS))
+        if self.residual is not None:
+            check_range("residual", self.residual, QUALITY_RANGE)
+            if self.bpp is not None:
+                raise LFValueError("residual: rate control (bpp) chooses the residual layer itself; give one or the other")
         if isinstance(self.alphas, str):
             check_choice("alphas", self.alphas, FOCUS_MODES)
         else:

@@ -203,12 +203,13 @@ class EncoderStage(ConsumerStage):
             choice = choose_configuration(lf[None], self.config.bpp, self.config.fps, self.present,
                                           preset=self.config.preset)
             self.encoder = Encoder(quality=choice.quality, depth_hint=choice.depth_hint, preset=choice.preset,
-                                   hint_options=choice.hint_options)
+                                   hint_options=choice.hint_options, residual=choice.residual)
         if not self.started:
             self.channel.send_header(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
             self.started = True
         packet = self.encoder.encode_frame(lf, item.seq, int(round(item.seq * 1e6 / self.config.fps)), self.present)
-        self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain), int(np.prod(lf.shape[:4])))
+        self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain) + len(packet.residual),
+                      int(np.prod(lf.shape[:4])))
         return packet
 
     def forward(self, packet: Packet) -> bool:

@@ -299,6 +299,7 @@ class TcpSender:
             raise TransportError(f"cannot connect to {host}:{port} ({exc.strerror or exc})") from exc
         self._sock.settimeout(timeout_s)
         self._addr = f"{host}:{port}"
+        self._version = 1  # until send_header
 
     def _send(self, tag: bytes, payload: bytes) -> None:
         try:
@@ -307,10 +308,11 @@ class TcpSender:
             raise TransportError(f"{self._addr}: send failed ({exc.strerror or exc})") from exc
 
     def send_header(self, header: StreamHeader) -> None:
+        self._version = header.version  # a packet's layout depends on it
         self._send(TAG_HEADER, pack_header(header))
 
     def send(self, packet: Packet, stop: threading.Event | None = None) -> bool:
-        self._send(TAG_PACKET, pack_packet(packet))
+        self._send(TAG_PACKET, pack_packet(packet, self._version))
         return True
 
     def close(self, stop: threading.Event | None = None) -> None:

@@ -42,15 +42,15 @@ def test_av1_round_trip_is_faithful_deterministic_and_crops_odd_sizes(scene):
 def test_colour_conversion_keeps_chroma_detail():
     """4:2:0 by 2x2 means and bilinear up-sampling: within 1 dB of JPEG q100's own 4:2:0
     round trip on a textured synthetic view (OpenCV's I420 conversion lost ~5 dB there)."""
-    from lfstream.codec.intra import _i420_to_rgb, _rgb_to_i420
+    from lfstream.codec.intra import i420_to_rgb, rgb_to_i420
     from lfstream.codec.jpeg import jpeg_roundtrip
 
     img = synth_clip(1, 3, (96, 128), seed=21, noise=2.0).lf[0, 1, 1]
-    back = _i420_to_rgb(_rgb_to_i420(img))
+    back = i420_to_rgb(rgb_to_i420(img))
     assert back.shape == img.shape and back.dtype == np.uint8
     assert psnr(img, back) >= psnr(img, jpeg_roundtrip(img, 100)) - 1.0
     grey = np.repeat(img.mean(axis=2, keepdims=True).astype(np.uint8), 3, axis=2)
-    assert np.abs(_i420_to_rgb(_rgb_to_i420(grey)).astype(int) - grey).max() <= 2  # no chroma: exact up to rounding
+    assert np.abs(i420_to_rgb(rgb_to_i420(grey)).astype(int) - grey).max() <= 2  # no chroma: exact up to rounding
 
 
 def test_quality_maps_onto_the_whole_crf_range():
@@ -123,8 +123,9 @@ def test_rate_control_considers_every_preset_and_reproduces_its_stream(scene):
     assert {c["preset"] for c in choice.candidates} == set(PRESETS)
     assert {c["hint_scale"] for c in choice.candidates} == {4, 8, None}
     assert abs(choice.bpp - target) / target <= RATE_TOLERANCE
+    # the chosen configuration, encoded plainly, gives the same bytes (the residual layer included)
     again = lfstream.encode(scene, quality=choice.quality, depth_hint=choice.depth_hint, preset=choice.preset,
-                            hint_options=choice.hint_options)
+                            hint_options=choice.hint_options, residual=choice.residual)
     assert choice.stream() == again
     assert bpp(len(lfstream.encode(scene, bpp=target)), scene.shape) == pytest.approx(choice.bpp)
 

@@ -29,13 +29,14 @@ def test_encode_lands_within_the_tolerance_of_the_target(scene, target):
 def test_the_size_estimate_is_exact_and_the_better_candidate_wins(scene):
     choice = choose_configuration(scene, 0.12, 30.0)
     data = lfstream.encode(scene, quality=choice.quality, depth_hint=choice.depth_hint, hint_options=choice.hint_options,
-                           preset=choice.preset)
+                           preset=choice.preset, residual=choice.residual)
     assert bpp(len(data), scene.shape) == pytest.approx(choice.bpp, rel=1e-12)  # predicted without re-encoding
     assert choice.stream() == data  # the search's own stream is the encoder's bytes, reused as they are
     inside = [c for c in choice.candidates if abs(c["bpp"] - 0.12) / 0.12 <= RATE_TOLERANCE]
     assert choice.mpsnr_first_frame == max(c["mpsnr_first_frame"] for c in inside)
     first = lfstream.decode(lfstream.encode(scene[:1], quality=choice.quality, depth_hint=choice.depth_hint,
-                                            hint_options=choice.hint_options, preset=choice.preset))[0]
+                                            hint_options=choice.hint_options, preset=choice.preset,
+                                            residual=choice.residual))[0]
     assert float(mpsnr(scene[0], first)) == pytest.approx(choice.mpsnr_first_frame, abs=1e-6)
 
 
