@@ -206,7 +206,7 @@ def test_ctrl_c_during_stream_exits_130_with_finalised_outputs(tmp_path):
     from lfstream.synth import synth_clip
 
     clip = tmp_path / "clip.npy"
-    np.save(clip, synth_clip(300, 5, (48, 64), seed=1).lf)
+    np.save(clip, synth_clip(600, 5, (48, 64), seed=1).lf)  # long enough that SIGINT lands mid-stream
     out = tmp_path / "out"
     cmd = [sys.executable, "-c", "import sys; from lfstream.cli import main; sys.exit(main())",
            "stream", str(clip), "-o", str(out), "--refocus", "sas", "--mssim-every", "0"]
@@ -214,7 +214,7 @@ def test_ctrl_c_during_stream_exits_130_with_finalised_outputs(tmp_path):
     deadline = time.time() + 120
     while time.time() < deadline and not any(out.glob(".plane_00.*")):  # the stream is under way
         time.sleep(0.05)
-    time.sleep(0.5)
+    time.sleep(0.1)
     t0 = time.time()
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
@@ -222,7 +222,7 @@ def test_ctrl_c_during_stream_exits_130_with_finalised_outputs(tmp_path):
     assert time.time() - t0 < 15
     assert "terminate called" not in err and "Traceback" not in err
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["interrupted"] is True and 0 < summary["frames"] < 300
+    assert summary["interrupted"] is True and 0 < summary["frames"] < 600
     videos = sorted(out.glob("plane_*.mp4"))
     assert len(videos) == len(summary["planes"]) >= 4 and not list(out.glob(".*"))  # no temporary left behind
     counts = {len(list(iter_video_frames(v))) for v in videos}
