@@ -23,6 +23,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from lfstream.codec.intra import pad_to_even
 from lfstream.errors import LFValueError
 from lfstream.lightfield import check_lf, to_uint8
 
@@ -114,9 +115,7 @@ def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order
                                       options=spec.options(quality, u * v, constant_qp, preset))
         stream.width, stream.height, stream.pix_fmt = pw, ph, "yuv420p"
         for a, b in view_order(u, v, order):
-            img = frame_lf[a, b]
-            if (ph, pw) != (h, w):
-                img = np.pad(img, ((0, ph - h), (0, pw - w), (0, 0)), mode="edge")
+            img = pad_to_even(frame_lf[a, b])
             frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(img), format="rgb24").reformat(format="yuv420p")
             for packet in stream.encode(frame):
                 container.mux(packet)

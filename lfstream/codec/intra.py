@@ -94,6 +94,35 @@ def i420_to_rgb(planes: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(np.dstack([y, up[0], up[1]]), cv2.COLOR_YCrCb2RGB)
 
 
+def pad_to_even(img: np.ndarray) -> np.ndarray:
+    """``img`` padded by edge replication to even height and width (4:2:0 needs them);
+    ``img`` itself when they are even already.
+
+    Shape:
+        - img: ``(H, W, C)``; output ``(H + H % 2, W + W % 2, C)``
+    """
+    h, w = img.shape[:2]
+    if h % 2 == 0 and w % 2 == 0:
+        return img
+    return np.pad(img, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
+
+
+def svtav1_encoder(size: tuple[int, int], quality: int, speed: int, gop: int | None = None):
+    """An SVT-AV1 encoder context for even-sized 4:2:0 frames at ``quality`` (1..100, mapped
+    by :func:`av1_crf`) and preset ``speed``; ``gop``: the key-frame interval, if set."""
+    import av
+
+    ctx = av.CodecContext.create("libsvtav1", "w")
+    ctx.height, ctx.width = size
+    ctx.pix_fmt = "yuv420p"
+    ctx.time_base = Fraction(1, 25)
+    options = {"preset": str(int(speed)), "crf": str(av1_crf(quality))}
+    if gop is not None:
+        options["g"] = str(int(gop))
+    ctx.options = options
+    return ctx
+
+
 def encode_av1(img: np.ndarray, quality: int, speed: int = 12) -> bytes:
     """One AV1 key frame (4:2:0, 8 bit) of a uint8 RGB image; odd sizes are padded by edge
     replication (the decoder crops to the header's size).
@@ -103,16 +132,9 @@ def encode_av1(img: np.ndarray, quality: int, speed: int = 12) -> bytes:
     """
     import av
 
-    h, w = img.shape[:2]
-    ph, pw = h + h % 2, w + w % 2
-    if (ph, pw) != (h, w):
-        img = np.pad(img, ((0, ph - h), (0, pw - w), (0, 0)), mode="edge")
-    i420 = rgb_to_i420(img)
-    ctx = av.CodecContext.create("libsvtav1", "w")
-    ctx.width, ctx.height, ctx.pix_fmt = pw, ph, "yuv420p"
-    ctx.time_base = Fraction(1, 25)
-    ctx.options = {"preset": str(int(speed)), "crf": str(av1_crf(quality))}
-    frame = av.VideoFrame.from_ndarray(i420, format="yuv420p")
+    img = pad_to_even(img)
+    ctx = svtav1_encoder(img.shape[:2], quality, speed)
+    frame = av.VideoFrame.from_ndarray(rgb_to_i420(img), format="yuv420p")
     frame.pts = 0
     data = b"".join(bytes(p) for p in ctx.encode(frame)) + b"".join(bytes(p) for p in ctx.encode(None))
     if not data:  # pragma: no cover - the encoder always emits a key frame for one input frame
@@ -154,5 +176,6 @@ def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int 
     raise BitstreamError(f"unknown centre-view codec id {codec_id}", frame)
 
 
-__all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb",
+__all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
+           "svtav1_encoder",
            "encode_av1", "decode_av1", "encode_centre", "decode_centre"]

@@ -166,6 +166,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         return float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
 
     hints = [hint_options] if hint_options is not None else [HintOptions(), HintOptions(hint_scale=COARSE_HINT_SCALE)]
+    res_preset = RESIDUAL_PRESET if preset is None else preset
     for hint, opts in [(True, h) for h in hints] + [(False, HintOptions())]:
         # hints and gains do not depend on the preset: one encode per frame, the centre
         # view recoded per preset and quality
@@ -180,7 +181,6 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
                                "hint_scale": opts.hint_scale if hint else None, "residual": None,
                                "bpp": bpp(n, frames.shape), "mpsnr_first_frame": measure(at_q, moved),
                                "_stream": (at_q, tuple(moved), opts)})
-        res_preset = RESIDUAL_PRESET if preset is None else preset
         if not (residual and hint and opts.hint_scale == HintOptions().hint_scale and frames.shape[1] * frames.shape[2] > 1):
             continue
         enc_r = Encoder(quality=50, depth_hint=True, hint_options=opts, gain_grid=gain_grid, preset=res_preset,

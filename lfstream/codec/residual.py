@@ -26,12 +26,12 @@ off (:class:`lfstream.codec.decoder.Decoder` decides).
 from __future__ import annotations
 
 import struct
-from fractions import Fraction
 
 import numpy as np
 
+from lfstream.codec.baseline import view_order
 from lfstream.codec.bitstream import CODEC_AV1
-from lfstream.codec.intra import AV1_SPEED_RANGE, av1_crf, i420_to_rgb, rgb_to_i420
+from lfstream.codec.intra import CentreCoding, i420_to_rgb, pad_to_even, rgb_to_i420, svtav1_encoder
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.errors import BitstreamError, LFValueError
 
@@ -46,12 +46,7 @@ def residual_views(views: tuple[int, int]) -> list[tuple[int, int]]:
     """The views a residual covers, in coding order: serpentine over the grid (rows
     alternate direction, so consecutive frames are neighbouring views), centre skipped."""
     u, v = views
-    u0, v0 = u // 2, v // 2
-    order = []
-    for a in range(u):
-        cols = range(v) if a % 2 == 0 else range(v - 1, -1, -1)
-        order.extend((a, b) for b in cols if (a, b) != (u0, v0))
-    return order
+    return [(a, b) for a, b in view_order(u, v, "serpentine") if (a, b) != (u // 2, v // 2)]
 
 
 def check_residual_quality(quality: int) -> int:
@@ -76,9 +71,7 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray, quality: int, speed:
     import av
 
     check_residual_quality(quality)
-    lo, hi = AV1_SPEED_RANGE
-    if not isinstance(speed, (int, np.integer)) or not lo <= speed <= hi:
-        raise LFValueError(f"residual speed: an SVT-AV1 preset in {lo}..{hi}, got {speed!r}")
+    CentreCoding("av1", speed)  # the same SVT-AV1 preset range as the centre view's
     if lf.shape != prediction.shape or lf.dtype != np.uint8 or prediction.dtype != np.uint8:
         raise LFValueError(f"residual: lf {lf.shape} {lf.dtype} and prediction {prediction.shape} {prediction.dtype} "
                            "must be uint8 of one shape")
@@ -86,11 +79,7 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray, quality: int, speed:
     order = residual_views((u, v))
     if not order:
         raise LFValueError("residual: a single-view light field has nothing to correct")
-    ph, pw = h + h % 2, w + w % 2
-    ctx = av.CodecContext.create("libsvtav1", "w")
-    ctx.width, ctx.height, ctx.pix_fmt = pw, ph, "yuv420p"
-    ctx.time_base = Fraction(1, 25)
-    ctx.options = {"preset": str(int(speed)), "crf": str(av1_crf(quality)), "g": str(len(order))}
+    ctx = svtav1_encoder((h + h % 2, w + w % 2), quality, speed, gop=len(order))
     chunks: list[bytes] = []
 
     def collect(packets) -> None:
@@ -100,9 +89,7 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray, quality: int, speed:
 
     for k, (a, b) in enumerate(order):
         res = np.clip(lf[a, b].astype(np.int16) - prediction[a, b] + OFFSET, 0, 255).astype(np.uint8)
-        if (ph, pw) != (h, w):
-            res = np.pad(res, ((0, ph - h), (0, pw - w), (0, 0)), mode="edge")
-        frame = av.VideoFrame.from_ndarray(rgb_to_i420(res), format="yuv420p")
+        frame = av.VideoFrame.from_ndarray(rgb_to_i420(pad_to_even(res)), format="yuv420p")
         frame.pts = k
         collect(ctx.encode(frame))
     collect(ctx.encode(None))
@@ -110,7 +97,7 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray, quality: int, speed:
 
 
 def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
-                    frame: int | None = None) -> list[np.ndarray]:
+                    frame: int | None = None) -> np.ndarray:
     """The residual views' decoded 4:2:0 planes, in :func:`residual_views` order.
 
     Raises:
