@@ -29,8 +29,9 @@ def _bilinear(img, y, x):
 def test_sweep_cost_matches_a_plain_reference(rng):
     images = rng.random((4, 9, 11), dtype=np.float32)
     offsets = np.float32([[-1, -1], [0, 2], [1.5, -0.5]])
-    shifts = np.float32([-1.3, 0.0, 0.4, 2.2])
-    cost = np.empty((4, 9, 11), np.float32)
+    # the last shift moves the outer views' taps past the whole row (the clamped path)
+    shifts = np.float32([-1.3, 0.0, 0.4, 2.2, -6.1])
+    cost = np.empty((5, 9, 11), np.float32)
     sweep_cost(images, offsets, shifts, cost)
     for k, s in enumerate(shifts):
         for y in range(9):
