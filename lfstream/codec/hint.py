@@ -90,6 +90,14 @@ class HintOptions:
             so a receiver that lost packets recovers.
         geometry: ``"auto"`` estimates the capture's view axes on a stream's first frame
             (:func:`estimate_view_axes`); ``"standard"`` assumes the convention (``A = I``).
+        median: size (1, 3 or 5) of a median filter on the sent grid; 1: none. The sweep's
+            outliers (textureless and occluded pixels) cost bits and help no view.
+        precision: quantisation step, as the displacement it makes at the outermost view, in
+            pixels (0: the 8-bit grid's finest step). The payload's format is the same; the
+            encoder only uses every k-th level, which zstd codes in fewer bytes. Measured
+            (with ``median=3``, q50, one frame): 0.2 px takes 11-23 % off the stream's bytes
+            on the shared samples and the synthetic clip (most of it hint bytes) at MPSNR
+            within 0.05 dB and MSSIM within 0.0005.
     """
 
     max_disparity: float | None = None
@@ -101,6 +109,8 @@ class HintOptions:
     search_limit: float = 16.0
     key_interval: int = 30
     geometry: str = "auto"
+    median: int = 3
+    precision: float = 0.2
 
     def validate(self) -> None:
         if self.max_disparity is not None and not (np.isfinite(self.max_disparity) and 0 < self.max_disparity <= 64):
@@ -111,13 +121,17 @@ class HintOptions:
             raise LFValueError("hint options: work_scale in 1..hint_scale")
         if not (0.01 <= self.step <= 2 and 0 < self.search_limit <= 64 and self.key_interval >= 1):
             raise LFValueError("hint options: step in [0.01, 2], search_limit in (0, 64], key_interval >= 1")
+        if self.median not in (1, 3, 5):
+            raise LFValueError(f"hint options: median 1, 3 or 5, got {self.median!r}")
+        if not (np.isfinite(self.precision) and 0 <= self.precision <= 4):
+            raise LFValueError(f"hint options: precision in [0, 4] px, got {self.precision!r}")
         if self.geometry not in GEOMETRY_MODES:
             raise LFValueError(f"hint options: geometry one of {', '.join(GEOMETRY_MODES)}, got {self.geometry!r}")
 
     def as_meta(self) -> dict:
         """What the stream header records about the hint."""
         return {"max_disparity": self.max_disparity, "hint_scale": self.hint_scale, "work_scale": self.work_scale,
-                "step": self.step, "box_radius": self.box_radius}
+                "step": self.step, "box_radius": self.box_radius, "median": self.median, "precision": self.precision}
 
 
 @dataclass(frozen=True)
@@ -130,12 +144,15 @@ class HintMap:
         search: ``(lo, hi)`` the sweep covered.
         axes: ``(2, 2)`` float32 view axes the disparity is measured along
             (:func:`lfstream.lightfield.view_offsets`); the identity for the convention.
+        reach: the largest displacement of any view per unit disparity (3 for 7 x 7 views
+            on the convention's axes): what a disparity error costs at the outermost view.
     """
 
     disparity: np.ndarray
     scale: int
     search: tuple[float, float]
     axes: np.ndarray = field(default_factory=lambda: np.eye(2, dtype=np.float32))
+    reach: float = 1.0
 
 
 def is_standard(axes: np.ndarray | None) -> bool:
@@ -377,7 +394,7 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     hs, ws = max(1, h // s), max(1, w // s)
     identity = np.eye(2, dtype=np.float32)
     if not keys:
-        return HintMap(np.zeros((hs, ws), np.float32), s, (0.0, 0.0), identity if axes is None else axes)
+        return HintMap(np.zeros((hs, ws), np.float32), s, (0.0, 0.0), identity if axes is None else axes, 1.0)
     centre = (u // 2, v // 2)
     steps = np.asarray([(a - centre[0], b - centre[1]) for a, b in keys], np.float64)
     grids = _grids(frame, [centre, *keys], work)
@@ -410,7 +427,10 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     f = s // work
     if f > 1:  # the sent grid: block means of the working-resolution map
         disp = cv2.resize(disp[: hs * f, : ws * f], (ws, hs), interpolation=cv2.INTER_AREA)
-    return HintMap(disp, s, (float(lo), float(hi)), axes)
+    if options.median > 1 and min(disp.shape) >= options.median:
+        disp = cv2.medianBlur(np.ascontiguousarray(disp, np.float32), options.median)
+    reach = float(np.abs(view_offsets((u, v), axes)).max()) or 1.0
+    return HintMap(disp, s, (float(lo), float(hi)), axes, reach)
 
 
 def estimate_disparity(lf: np.ndarray, options: HintOptions = HintOptions(),
@@ -455,12 +475,24 @@ class QuantisedHint:
         return (self.lo + self.q.astype(np.float32) / np.float32(255.0) * np.float32(span)).astype(np.float32)
 
 
-def quantise(hm: HintMap, search: tuple[float, float] | None = None) -> QuantisedHint:
-    """8-bit levels over ``search`` (default: the map's own range)."""
+def level_step(span: float, reach: float, precision: float) -> int:
+    """How many 8-bit levels apart the quantised values are: the largest step whose
+    displacement at the outermost view (``reach`` px per unit disparity) stays within
+    ``precision`` px (at least 1, at most 64)."""
+    if precision <= 0 or span <= 0:
+        return 1
+    return int(min(max(precision * 255.0 / (span * max(reach, 1e-6)), 1.0), 64.0))
+
+
+def quantise(hm: HintMap, search: tuple[float, float] | None = None, precision: float = 0.0) -> QuantisedHint:
+    """8-bit levels over ``search`` (default: the map's own range), every
+    :func:`level_step`-th level used."""
     d = hm.disparity
     lo, hi = search if search is not None else (float(d.min()), float(d.max()))
     span = hi - lo if hi > lo else 1.0
-    q = np.clip(np.round((d - lo) / span * 255.0), 0, 255).astype(np.uint8)
+    k = level_step(float(np.float32(hi) - np.float32(lo)), hm.reach, precision)
+    # multiples of k, and 255 for what rounds past the last one (still within k / 2 levels)
+    q = np.clip(np.round((d - lo) / span * (255.0 / k)) * k, 0, 255).astype(np.uint8)
     # the range as the payload will carry it (float32), so encoder and decoder agree exactly
     axes = None if is_standard(hm.axes) else np.asarray(hm.axes, np.float32)
     return QuantisedHint(q, float(np.float32(lo)), float(np.float32(hi)), hm.scale, axes)
@@ -504,7 +536,7 @@ def encode_hint(disparity: np.ndarray | HintMap, options: HintOptions = HintOpti
         hs, ws = max(1, d.shape[0] // s), max(1, d.shape[1] // s)
         small = cv2.resize(d[: hs * s, : ws * s], (ws, hs), interpolation=cv2.INTER_AREA)
         hm = HintMap(small, s, (float(d.min()), float(d.max())))
-    return _full_payload(quantise(hm))
+    return _full_payload(quantise(hm, precision=options.precision))
 
 
 class HintTracker:
@@ -542,7 +574,7 @@ class HintTracker:
         if not key and prev.q.shape == hm.disparity.shape and prev.scale == hm.scale \
                 and prev.lo <= float(hm.disparity.min()) and float(hm.disparity.max()) <= prev.hi:
             # on the previous frame's 8-bit grid: a delta, or nothing if nothing changed
-            qh = quantise(hm, (prev.lo, prev.hi))
+            qh = quantise(hm, (prev.lo, prev.hi), opts.precision)
             if np.array_equal(qh.q, prev.q):
                 payload = _pack(KIND_REPEAT, qh, self._prev_seq, b"")
             else:
@@ -557,7 +589,7 @@ class HintTracker:
             d = hm.disparity
             lo, hi = float(d.min()), float(d.max())
             pad = 0.1 * (hi - lo) + 0.05
-            qh = quantise(hm, (max(lo - pad, hm.search[0]), min(hi + pad, hm.search[1])))
+            qh = quantise(hm, (max(lo - pad, hm.search[0]), min(hi + pad, hm.search[1])), opts.precision)
             payload = _full_payload(qh)
             self._since_key = 0
             self._search = hm.search
@@ -694,4 +726,4 @@ def disparity_errors(estimate: np.ndarray, truth: np.ndarray, border: int = 15) 
 __all__ = ["HintReferenceError", "HintOptions", "HintMap", "HintTracker", "HintDecoder", "QuantisedHint", "sweep_views",
            "estimate_hint_map", "estimate_disparity",
            "estimate_view_axes", "is_standard", "GEOMETRY_MODES", "encode_hint", "decode_hint", "disparity_errors", "scene_range",
-           "quantise"]
+           "quantise", "level_step"]

@@ -10,7 +10,7 @@ import zstandard
 
 from lfstream.codec import hint as H
 from lfstream.codec._kernels import joint_upsample, sweep_cost, winner_subpixel
-from lfstream.errors import BitstreamError
+from lfstream.errors import BitstreamError, LFValueError
 from lfstream.synth import fronto_parallel_plane, synth_clip
 
 
@@ -108,11 +108,36 @@ def test_hint_accuracy_on_a_layered_scene_with_vignetting():
 def test_full_payload_round_trip_is_exact_on_the_8_bit_grid(rng):
     small = np.cumsum(rng.normal(0, 0.05, (23, 31)), axis=1).astype(np.float32)
     hm = H.HintMap(small, 4, (float(small.min()), float(small.max())))
-    payload = H.encode_hint(hm)
+    payload = H.encode_hint(hm, H.HintOptions(precision=0.0))
     qh = H.quantise(hm)
     back = H._parse(payload, (92, 124), 0, {})
     assert np.array_equal(back.q, qh.q) and back.scale == 4
     assert np.allclose(back.values(), small, atol=(small.max() - small.min()) / 255 / 2 + 1e-6)
+
+
+@pytest.mark.parametrize("reach", [1.0, 3.0, 6.0])
+def test_precision_bounds_the_displacement_error_at_the_outermost_view(rng, reach):
+    """With ``precision`` p the quantised values use every k-th level and the decoded map
+    moves no view's sample by more than p / 2 px (rounding to the nearest level)."""
+    small = np.cumsum(rng.normal(0, 0.05, (23, 31)), axis=1).astype(np.float32)
+    hm = H.HintMap(small, 4, (float(small.min()), float(small.max())), reach=reach)
+    for p in (0.05, 0.2, 0.5):
+        qh = H.quantise(hm, precision=p)
+        k = H.level_step(qh.hi - qh.lo, reach, p)
+        assert k >= 1 and np.all((qh.q % k == 0) | (qh.q == 255))
+        err = np.abs(qh.values() - small).max() * reach
+        assert err <= p / 2 + 1e-5, (p, k, err)
+        back = H._parse(H.encode_hint(hm, H.HintOptions(precision=p)), (92, 124), 0, {})
+        assert np.array_equal(back.q, qh.q)
+    # coarser levels: a smaller payload
+    fine = len(H.encode_hint(hm, H.HintOptions(precision=0.0)))
+    assert len(H.encode_hint(hm, H.HintOptions(precision=0.5))) < fine
+
+
+def test_median_and_precision_options_are_validated():
+    for bad in (dict(median=2), dict(median=7), dict(precision=-0.1), dict(precision=float("nan"))):
+        with pytest.raises(LFValueError):
+            H.HintOptions(**bad).validate()
 
 
 def test_version_1_payloads_still_decode():
@@ -134,7 +159,9 @@ def test_static_video_hints_cost_a_few_bytes_and_decode_like_full_ones():
     decoded = [dec.decode(p, (64, 96), frame=k) for k, p in enumerate(payloads)]
     fresh = [H.decode_hint(H.encode_hint(H.estimate_hint_map(f)), (64, 96)) for f in clip.lf]
     for a, b in zip(decoded, fresh):
-        assert np.abs(a - b).max() < 0.05  # the previous frame's 8-bit grid, within a level or two
+        # two grids (the key hint's range, the frame's own), each within precision / 2 at
+        # the outermost view (reach 2 for 5 x 5 views), plus a level of the 8-bit grid
+        assert np.abs(a - b).max() < H.HintOptions().precision / 2 + 0.02
 
 
 def test_a_lost_reference_is_a_clear_error_and_a_key_hint_recovers():
