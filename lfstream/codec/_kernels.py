@@ -202,40 +202,52 @@ def _row_sample(packed, i00, i01, i10, i11, fxs, fys, c, ch0, n_ch, dst):  # pra
 
 
 @numba.njit(**_ROW)
-def _row_sample_gain(packed, i00, i01, i10, i11, fxs, fys, c, ch0, n_ch, top, bottom, wa, dst):  # pragma: no cover
-    """Bilinear samples of one view row times the gain ``wa * top + (1 - wa) * bottom``
-    (two gain rows, (W * n_ch,), that include the fixed-point scale), rounded and
-    saturated to uint8."""
-    m = np.uint64(_LANE_MASK)
+def _row_gain_apply(vals, top, bottom, wa, dst):  # pragma: no cover - compiled
+    """dst[j] = vals[j] * (wa * top[j] + (1 - wa) * bottom[j]), rounded and saturated to
+    uint8: contiguous, so LLVM vectorises it (the same arithmetic inside the sampling loop,
+    whose gathers keep it scalar, cost a third of the warp)."""
     wb = np.float32(1.0) - wa
-    for x in range(i00.shape[0]):
-        acc = _sample_at(packed, i00, i01, i10, i11, fxs, fys, x)
-        for j in range(n_ch):
-            # via int32: an unsigned 64-bit to float conversion is a long instruction sequence
-            lane = np.float32(np.int32((acc >> np.uint64(_LANE * j)) & m))
-            gain = top[x * n_ch + j] * wa + bottom[x * n_ch + j] * wb
-            dst[x * c + ch0 + j] = min(np.int32(lane * gain + np.float32(0.5)), 255)
+    half = np.float32(0.5)
+    for j in range(vals.shape[0]):
+        dst[j] = min(np.int32(np.float32(vals[j]) * (top[j] * wa + bottom[j] * wb) + half), 255)
 
 
 @numba.njit(**_ROW)
-def _row_sample3_gain(packed, i00, i01, i10, i11, fxs, fys, top, bottom, wa, dst):  # pragma: no cover
-    """:func:`_row_sample_gain` for three channels, unrolled. Both unrolled samplers earn
-    their place in the full kernel: with the general ones alone the warp took 20-35 % longer
-    (interleaved runs, 7x7x375x540), though a row-by-row micro-benchmark shows no gap."""
+def _row_sample_gain(packed, i00, i01, i10, i11, fxs, fys, c, ch0, n_ch, top, bottom, wa, vals, dst):  # pragma: no cover
+    """Bilinear samples of one view row times the gain ``wa * top + (1 - wa) * bottom``
+    (two gain rows, (W * n_ch,), that include the fixed-point scale), rounded and
+    saturated to uint8; ``vals`` (W * n_ch,) int32 scratch."""
     m = np.uint64(_LANE_MASK)
+    w = i00.shape[0]
+    for x in range(w):
+        acc = _sample_at(packed, i00, i01, i10, i11, fxs, fys, x)
+        for j in range(n_ch):
+            vals[x * n_ch + j] = np.int32((acc >> np.uint64(_LANE * j)) & m)
+    if n_ch == c:
+        _row_gain_apply(vals, top, bottom, wa, dst)
+        return
     wb = np.float32(1.0) - wa
-    half = np.float32(0.5)
+    for x in range(w):
+        for j in range(n_ch):
+            k = x * n_ch + j
+            dst[x * c + ch0 + j] = min(np.int32(np.float32(vals[k]) * (top[k] * wa + bottom[k] * wb)
+                                                + np.float32(0.5)), 255)
+
+
+@numba.njit(**_ROW)
+def _row_sample3_gain(packed, i00, i01, i10, i11, fxs, fys, top, bottom, wa, vals, dst):  # pragma: no cover
+    """:func:`_row_sample_gain` for three channels: the gathers unrolled into ``vals``, then
+    the gain pass over the contiguous row. Both unrolled samplers earn their place in the
+    full kernel: with the general ones alone the warp took 20-35 % longer (interleaved runs,
+    7x7x375x540), though a row-by-row micro-benchmark shows no gap."""
+    m = np.uint64(_LANE_MASK)
     for x in range(i00.shape[0]):
         acc = _sample_at(packed, i00, i01, i10, i11, fxs, fys, x)
-        r = np.float32(np.int32(acc & m))
-        g = np.float32(np.int32((acc >> np.uint64(_LANE)) & m))
-        b = np.float32(np.int32((acc >> np.uint64(2 * _LANE)) & m))
         k = np.uint32(3 * x)
-        k1 = k + np.uint32(1)
-        k2 = k + np.uint32(2)
-        dst[k] = min(np.int32(r * (top[k] * wa + bottom[k] * wb) + half), 255)
-        dst[k1] = min(np.int32(g * (top[k1] * wa + bottom[k1] * wb) + half), 255)
-        dst[k2] = min(np.int32(b * (top[k2] * wa + bottom[k2] * wb) + half), 255)
+        vals[k] = np.int32(acc & m)
+        vals[k + np.uint32(1)] = np.int32((acc >> np.uint64(_LANE)) & m)
+        vals[k + np.uint32(2)] = np.int32((acc >> np.uint64(2 * _LANE)) & m)
+    _row_gain_apply(vals, top, bottom, wa, dst)
 
 
 @numba.njit(**_PARALLEL)
@@ -282,14 +294,15 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, offsets, occlusion, gains,
         fys = np.empty(w, np.int32)
         gh = gains.shape[2] if has_gains else 1
         gcols = np.ones((gh, w * n_ch), np.float32)
+        vals = np.empty(w * n_ch, np.int32)
         for k in range(task, n_views, chunks):
             _warp_view(packed, channels, ch0, n_ch, disp, offsets, k // n_v, k % n_v, occlusion, gains, g_rows,
-                       g_row_w, g_cols, g_col_w, dview, d_row, src_x, i00, i01, i10, i11, fxs, fys, gcols, out)
+                       g_row_w, g_cols, g_col_w, dview, d_row, src_x, i00, i01, i10, i11, fxs, fys, gcols, vals, out)
 
 
 @numba.njit(**_ROW)
 def _warp_view(packed, channels, ch0, n_ch, disp, offsets, u, v, occlusion, gains, g_rows, g_row_w, g_cols, g_col_w,
-               dview, d_row, src_x, i00, i01, i10, i11, fxs, fys, gcols, out):  # pragma: no cover - compiled
+               dview, d_row, src_x, i00, i01, i10, i11, fxs, fys, gcols, vals, out):  # pragma: no cover - compiled
     """One view of :func:`warp_all_views`, in the caller's scratch buffers."""
     h, w = disp.shape
     has_gains = gains.shape[0] > 0
@@ -319,10 +332,10 @@ def _warp_view(packed, channels, ch0, n_ch, disp, offsets, u, v, occlusion, gain
             _row_taps(row, src_x, True, y, du, dv, h, i00, i01, i10, i11, fxs, fys)
         if has_gains and channels == 3:
             _row_sample3_gain(packed, i00, i01, i10, i11, fxs, fys, gcols[g_rows[y, 0]], gcols[g_rows[y, 1]],
-                              g_row_w[y], out[u, v, y])
+                              g_row_w[y], vals, out[u, v, y])
         elif has_gains:
             _row_sample_gain(packed, i00, i01, i10, i11, fxs, fys, channels, ch0, n_ch, gcols[g_rows[y, 0]],
-                             gcols[g_rows[y, 1]], g_row_w[y], out[u, v, y])
+                             gcols[g_rows[y, 1]], g_row_w[y], vals, out[u, v, y])
         elif channels == 3:
             _row_sample3(packed, i00, i01, i10, i11, fxs, fys, out[u, v, y])
         else:

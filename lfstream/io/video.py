@@ -106,7 +106,8 @@ class VideoWriter:
     """
 
     def __init__(self, path: str | os.PathLike, fps: float = 30.0, lossless: bool = True, crf: int = 18,
-                 metadata: dict[str, str] | None = None, preset: str = "medium", threads: int | None = None) -> None:
+                 metadata: dict[str, str] | None = None, preset: str = "medium", threads: int | None = None,
+                 low_delay: bool = False) -> None:
         self.path = Path(path)
         ext = self.path.suffix.lower()
         if ext not in VIDEO_EXTS + (".gif",):
@@ -116,11 +117,18 @@ class VideoWriter:
         # encoder threads (None: the codec's own choice); a caller running many writers in one
         # thread gives each one thread rather than multiplying x264's frame threads
         self._threads = threads
+        # x264's default lookahead (10 frames at veryfast, plus B-frames) holds frames back
+        # and encodes them when the file is closed: a dozen plane writers then spend ~0.3-0.4 s
+        # at close (7x7x375x540 stream, 13 planes). One frame of lookahead and one B-frame
+        # encode each frame as it comes (measured: same CPU, -2 % bytes at crf - 1, flush
+        # 300 -> 50 ms)
+        self._low_delay = low_delay
         self._container = None
         self._stream = None
         self._size: tuple[int, int] | None = None
         self._tmp = temp_sibling(self.path)
         self.frames = 0
+        self.packets = 0  # packets muxed so far (a low-delay writer keeps up with its frames)
 
     def _open(self, h: int, w: int) -> None:
         import av
@@ -137,6 +145,8 @@ class VideoWriter:
             # (readers crop it back, see iter_video_frames)
             pix_fmt = "yuv420p"
             codec, options = "libx264", {"crf": str(self._crf), "preset": self._preset}
+            if self._low_delay:
+                options["x264-params"] = "rc-lookahead=1:bframes=1"
         if self._threads is not None and codec != "gif":
             options = {**options, "threads": str(int(self._threads))}
         ph, pw = (h + h % 2, w + w % 2) if pix_fmt == "yuv420p" else (h, w)
@@ -165,12 +175,14 @@ class VideoWriter:
         if img.shape != (h, w, 3) or img.dtype != np.uint8:
             raise LFShapeError(f"{self.path}: every frame must be uint8 ({h}, {w}, 3), got {img.dtype} {img.shape}")
         ph, pw = self._padded
-        if (ph, pw) != (h, w):
-            img = np.pad(img, ((0, ph - h), (0, pw - w), (0, 0)), mode="edge")
         try:
-            frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(img), format="rgb24")
+            if self._stream.pix_fmt == "yuv420p":
+                frame = av.VideoFrame.from_ndarray(rgb_to_video_i420(img, (ph, pw)), format="yuv420p")
+            else:
+                frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(img), format="rgb24")
             for packet in self._stream.encode(frame):
                 self._container.mux(packet)
+                self.packets += 1
         except av.error.FFmpegError as exc:  # type: ignore[attr-defined]
             raise LFFileError(f"{self.path}: video encoding failed ({exc})") from exc
         self.frames += 1
@@ -184,6 +196,7 @@ class VideoWriter:
         try:
             for packet in self._stream.encode():
                 self._container.mux(packet)
+                self.packets += 1
             self._container.close()
             os.replace(self._tmp, self.path)
         except (av.error.FFmpegError, OSError) as exc:  # type: ignore[attr-defined]
@@ -210,6 +223,37 @@ class VideoWriter:
         self.abort() if exc_type is not None else self.close()
 
 
+#: BT.601 limited-range chroma rows (U, V) of RGB -> YCbCr with the offset column, the
+#: conversion FFmpeg's swscale applies to untagged SD video
+_RGB_TO_UV = np.array([[-0.1482, -0.2910, 0.4392, 128.0], [0.4392, -0.3678, -0.0714, 128.0]], np.float32)
+
+
+def rgb_to_video_i420(img: np.ndarray, size: tuple[int, int] | None = None) -> np.ndarray:
+    """RGB to planar 4:2:0 YCbCr as players expect it (BT.601, limited range: what PyAV's
+    swscale produces for untagged video, within one level, ~1.7x faster: 0.95 vs 1.6 ms for
+    376 x 540), padded by edge replication to ``size`` (even). Chroma is the 2 x 2 area
+    mean, as swscale's. (:func:`lfstream.codec.intra.rgb_to_i420` is the codec's own
+    full-range conversion, which its decoder inverts.)
+
+    Shape:
+        - img: ``(H, W, 3)`` uint8
+        - output: ``(3 * h // 2, w)`` uint8, ``(h, w) = size`` (default ``(H, W)``, even)
+    """
+    import cv2
+
+    h, w = size if size is not None else img.shape[:2]
+    if h % 2 or w % 2 or h < img.shape[0] or w < img.shape[1]:
+        raise LFValueError(f"4:2:0 needs an even size that holds the image, got {(h, w)} for {img.shape[:2]}")
+    if (h, w) != img.shape[:2]:
+        img = cv2.copyMakeBorder(img, 0, h - img.shape[0], 0, w - img.shape[1], cv2.BORDER_REPLICATE)
+    out = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2YUV_I420)  # Y as swscale's; its chroma is not
+    uv = cv2.transform(cv2.resize(img, (w // 2, h // 2), interpolation=cv2.INTER_AREA), _RGB_TO_UV)
+    q = h // 4
+    out[h:h + q] = uv[..., 0].reshape(q, w)
+    out[h + q:] = uv[..., 1].reshape(q, w)
+    return out
+
+
 def write_video(
     path: Path,
     frames: Sequence[np.ndarray] | np.ndarray,
@@ -234,4 +278,4 @@ def grid_metadata(views: tuple[int, int]) -> dict[str, str]:
 
 
 __all__ = ["VIDEO_EXTS", "GRID_METADATA_KEY", "GRID_METADATA_PREFIX", "SIZE_METADATA_PREFIX", "VideoWriter",
-           "write_video", "iter_video_frames", "video_grid_and_fps", "read_mosaic_video", "grid_metadata"]
+           "rgb_to_video_i420", "write_video", "iter_video_frames", "video_grid_and_fps", "read_mosaic_video", "grid_metadata"]

@@ -20,13 +20,16 @@ WARMUP_SHAPE = (3, 3, 24, 32, 3)
 
 def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     """Runs the encoder, decoder, focal stack and metrics of ``config`` once on a tiny light
-    field, so that their kernels are loaded (networks are not run: they load on their own).
+    field, so that their kernels are loaded (networks are not run: they load on their own),
+    and imports the sink's video library when the stream writes videos.
     ``decode=False`` (a stream that ends at the transport) stops after the encoder; a stream
     that starts at the transport still encodes the tiny frame, to have a packet to decode."""
     u, v, h, w, c = WARMUP_SHAPE
     yy, xx = np.mgrid[0:h, 0:w]
     ramp = ((yy * 5 + xx * 3) % 256).astype(np.uint8)
     lf = np.ascontiguousarray(np.broadcast_to(ramp[None, None, :, :, None], (u, v, h, w, c)))
+    if any(kind in config.save for kind in ("mp4", "mp4-lossless", "sweep", "lf")):
+        import av  # noqa: F401 - the sink's video library: ~0.1 s to import, paid here once
     from lfstream.codec.decoder import Decoder
 
     encoder = config.encoder()
