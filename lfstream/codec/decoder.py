@@ -21,7 +21,7 @@ from lfstream.codec.bitstream import CODEC_JPEG, Limits, Packet, StreamHeader, i
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
 from lfstream.codec.residual import apply_residual
-from lfstream.codec.shading import apply_gains, decode_gains
+from lfstream.codec.shading import GainDecoder, GainReferenceError, apply_gains
 from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.errors import BitstreamError, LFFileError, LFValueError
 
@@ -95,6 +95,9 @@ class Decoder:
         self._last_disparity: np.ndarray | None = None
         self._last_axes: np.ndarray | None = None
         self.hint_fallbacks = 0  # delta hints whose reference frame never arrived
+        self._gain_maps = GainDecoder()
+        self._last_gains: np.ndarray | None = None
+        self.gain_fallbacks = 0  # delta gain maps whose reference frame never arrived
         self.residual_skipped = 0  # residual layers not applied: this decoder's prediction is not their reference
         self._depth_net = None
         if self.depth == "net":
@@ -175,7 +178,16 @@ class Decoder:
         return d, self._last_axes
 
     def _gains(self, packet: Packet) -> np.ndarray | None:
-        return decode_gains(packet.gain, self.header.views, packet.seq) if packet.gain else None
+        """The packet's gain maps; where they are a delta to a frame that never arrived, the
+        last maps this decoder decoded stand in until the next key map (counted in
+        :attr:`gain_fallbacks`)."""
+        if not packet.gain:
+            return None
+        try:
+            self._last_gains = self._gain_maps.decode(packet.gain, self.header.views, packet.seq)
+        except GainReferenceError:
+            self.gain_fallbacks += 1
+        return self._last_gains
 
     def _warp(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray,
               axes: np.ndarray | None = None) -> DecodedFrame:

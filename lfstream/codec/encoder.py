@@ -24,7 +24,7 @@ from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_
 from lfstream.codec.hint import HintOptions, HintTracker
 from lfstream.codec.intra import CentreCoding, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE
-from lfstream.codec.shading import encode_gains, measure_gains, shading_present
+from lfstream.codec.shading import GainTracker, measure_gains, shading_present
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.io._fs import atomic_open
 from lfstream.lightfield import centre_view, check_finite, check_lf, to_uint8
@@ -89,6 +89,7 @@ class Encoder:
             raise LFValueError(f"gain_grid: an integer in 0..64, got {self.gain_grid!r}")
         self.hint_options.validate()
         self._hints = HintTracker(self.hint_options)
+        self._gains = GainTracker(self.hint_options.key_interval)  # key maps with the key hints' interval
 
     def header(self, views: tuple[int, int], size: tuple[int, int], fps: float) -> StreamHeader:
         from lfstream import __version__
@@ -133,7 +134,7 @@ class Encoder:
         gain = b""
         if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1:
             gains = measure_gains(frame, self.gain_grid, present=present)
-            gain = encode_gains(gains) if shading_present(gains) else b""
+            gain = self._gains.encode(gains if shading_present(gains) else None, seq)
         packet = Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
         if self.residual is not None and frame.shape[0] * frame.shape[1] > 1:
             packet = self.add_residual(packet, frame, self.residual)

@@ -248,9 +248,9 @@ def rgb_to_video_i420(img: np.ndarray, size: tuple[int, int] | None = None) -> n
         img = cv2.copyMakeBorder(img, 0, h - img.shape[0], 0, w - img.shape[1], cv2.BORDER_REPLICATE)
     out = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2YUV_I420)  # Y as swscale's; its chroma is not
     uv = cv2.transform(cv2.resize(img, (w // 2, h // 2), interpolation=cv2.INTER_AREA), _RGB_TO_UV)
-    q = h // 4
-    out[h:h + q] = uv[..., 0].reshape(q, w)
-    out[h + q:] = uv[..., 1].reshape(q, w)
+    flat, n = out.reshape(-1), (h // 2) * (w // 2)  # the planes lie back to back (h / 2 may be odd)
+    flat[h * w:h * w + n] = uv[..., 0].ravel()
+    flat[h * w + n:] = uv[..., 1].ravel()
     return out
 
 

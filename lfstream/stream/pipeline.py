@@ -186,8 +186,9 @@ class Pipeline:
         refocuser = refocus.refocuser if refocus is not None else None
         receive = recv_channel.stats.as_dict() if recv_channel is not None else None
         if receive is not None and decoder is not None and decoder.decoder is not None:
-            # delta hints whose reference frame was lost: the previous disparity stood in
+            # delta hints / gain maps whose reference frame was lost: the previous ones stood in
             receive["hint_fallbacks"] = decoder.decoder.hint_fallbacks
+            receive["gain_fallbacks"] = decoder.decoder.gain_fallbacks
         return build_summary(
             wall_s=wall,
             warmup_s=t_start - t_warm,

@@ -21,13 +21,14 @@ def _psnr(a, b):
     return 10 * np.log10(255.0**2 / np.mean((a.astype(np.float64) - b) ** 2))
 
 
-def test_video_i420_matches_swscale(rng):
-    img = _smooth_rgb(rng, 64, 90)
+@pytest.mark.parametrize("h, w", [(64, 90), (34, 48)])  # half heights even and odd
+def test_video_i420_matches_swscale(rng, h, w):
+    img = _smooth_rgb(rng, h, w)
     ours, ref = rgb_to_video_i420(img).astype(int), _swscale_i420(img).astype(int)
-    assert ours.shape == ref.shape == (96, 90)
+    assert ours.shape == ref.shape == (h * 3 // 2, w)
     # luma within one level; chroma (2x2 means, as swscale's) within two, 0.5 on average
-    assert np.abs(ours[:64] - ref[:64]).max() <= 1
-    assert np.abs(ours[64:] - ref[64:]).max() <= 2 and np.abs(ours[64:] - ref[64:]).mean() < 0.5
+    assert np.abs(ours[:h] - ref[:h]).max() <= 1
+    assert np.abs(ours[h:] - ref[h:]).max() <= 2 and np.abs(ours[h:] - ref[h:]).mean() < 0.5
     # and the player's inverse (swscale's) brings it back as close as swscale's own round trip
     back = av.VideoFrame.from_ndarray(rgb_to_video_i420(img), format="yuv420p").to_ndarray(format="rgb24")
     own = av.VideoFrame.from_ndarray(_swscale_i420(img), format="yuv420p").to_ndarray(format="rgb24")

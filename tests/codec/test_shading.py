@@ -1,0 +1,114 @@
+"""Gain maps in a video (lfstream.codec.shading): key maps, deltas with a dead band, lost
+references."""
+
+import numpy as np
+import pytest
+
+import lfstream
+from lfstream.codec.bitstream import split_stream
+from lfstream.codec.decoder import Decoder
+from lfstream.codec.encoder import Encoder
+from lfstream.codec.shading import (
+    VERSION,
+    VERSION_DELTA,
+    GainDecoder,
+    GainReferenceError,
+    GainTracker,
+    encode_gains,
+    measure_gains,
+)
+from lfstream.errors import BitstreamError, LFValueError
+from lfstream.metrics import mpsnr
+from lfstream.synth import synth_clip
+
+VIEWS = (5, 5)
+
+
+def mean_psnr(ref, test):
+    return float(np.minimum(mpsnr(ref, test), 100.0))  # the centre view of a warp is exact
+
+
+@pytest.fixture(scope="module")
+def shaded_gains():
+    """Gain maps of a vignetted clip with motion: shading plus content that moves."""
+    clip = synth_clip(6, 5, (64, 96), seed=8, vignetting=0.6, motion=1.0, camera_pan=0.3).lf
+    return [measure_gains(f) for f in clip]
+
+
+def test_key_maps_are_version_1_byte_for_byte_and_deltas_are_smaller(shaded_gains):
+    tracker = GainTracker(key_interval=4)
+    payloads = [tracker.encode(g, k) for k, g in enumerate(shaded_gains)]
+    assert payloads[0] == encode_gains(shaded_gains[0])  # the first frame: the single-frame payload
+    assert payloads[4] == encode_gains(shaded_gains[4])  # a key map every 4 frames
+    assert [p[0] for p in payloads] == [VERSION, VERSION_DELTA, VERSION_DELTA, VERSION_DELTA, VERSION, VERSION_DELTA]
+    assert max(len(p) for k, p in enumerate(payloads) if k % 4) < 0.6 * min(len(payloads[0]), len(payloads[4]))
+
+
+def test_decoded_deltas_stay_within_the_dead_band(shaded_gains):
+    tracker, dec = GainTracker(key_interval=30, deadband=1), GainDecoder()
+    for k, g in enumerate(shaded_gains):
+        back = dec.decode(tracker.encode(g, k), VIEWS, frame=k)
+        # a step is 1/64 octave: the sent value is within the dead band plus rounding
+        err = np.abs(np.log2(back) - np.log2(np.clip(g, 0.25, 3.9))).max()
+        assert err <= (1 + 0.5) / 64 + 1e-6, (k, err)
+    # a dead band of 0 sends every change: the decoded maps equal the single-frame coding
+    tracker, dec = GainTracker(deadband=0), GainDecoder()
+    for k, g in enumerate(shaded_gains):
+        np.testing.assert_array_equal(dec.decode(tracker.encode(g, k), VIEWS, frame=k),
+                                      GainDecoder().decode(encode_gains(g), VIEWS))
+
+
+def test_gaps_and_vanishing_shading_send_key_maps(shaded_gains):
+    tracker = GainTracker()
+    assert tracker.encode(shaded_gains[0], 0)[0] == VERSION
+    assert tracker.encode(shaded_gains[1], 2)[0] == VERSION  # frame 1 was never encoded
+    assert tracker.encode(None, 3) == b""  # no shading: nothing sent
+    assert tracker.encode(shaded_gains[2], 4)[0] == VERSION
+    with pytest.raises(LFValueError, match="key_interval"):
+        GainTracker(key_interval=0)
+
+
+def test_a_lost_reference_is_a_clear_error_and_redecoding_a_frame_works(shaded_gains):
+    tracker = GainTracker(key_interval=3)
+    payloads = [tracker.encode(g, k) for k, g in enumerate(shaded_gains[:4])]
+    dec = GainDecoder()
+    first = dec.decode(payloads[0], VIEWS, frame=0)
+    with pytest.raises(GainReferenceError, match="frame 1") as info:
+        dec.decode(payloads[2], VIEWS, frame=2)  # frame 1 never arrived
+    assert info.value.frame == 2 and isinstance(info.value, BitstreamError)
+    assert dec.decode(payloads[3], VIEWS, frame=3).shape == first.shape  # the key map recovers
+    # the stream's static-skip audit decodes a packet twice: the same maps both times
+    dec = GainDecoder()
+    dec.decode(payloads[0], VIEWS, frame=0)
+    once = dec.decode(payloads[1], VIEWS, frame=1)
+    np.testing.assert_array_equal(dec.decode(payloads[1], VIEWS, frame=1), once)
+
+
+@pytest.mark.parametrize("cut", [0, 5, 8, 11])
+def test_truncated_delta_payloads_are_bitstream_errors(shaded_gains, cut):
+    tracker = GainTracker()
+    tracker.encode(shaded_gains[0], 0)
+    delta = tracker.encode(shaded_gains[1], 1)
+    with pytest.raises(BitstreamError, match="frame 1"):
+        GainDecoder().decode(delta[:cut], VIEWS, frame=1)
+
+
+def test_a_video_sends_deltas_and_a_lost_one_falls_back():
+    clip = synth_clip(4, 5, (64, 96), seed=9, vignetting=0.6, motion=1.0, camera_pan=0.3).lf
+    header, packets = split_stream(lfstream.encode(clip, quality=80))
+    assert [p.gain[0] for p in packets] == [VERSION] + [VERSION_DELTA] * 3
+    dec = Decoder(header)
+    full = [dec.decode_packet(p).lf for p in packets]
+    assert dec.gain_fallbacks == 0
+    # against full maps every frame (a dead band of 0): the dead band costs little quality
+    exact = Encoder(quality=80)
+    exact._gains = GainTracker(deadband=0)
+    dec0 = Decoder(header)
+    for k, f in enumerate(clip):
+        ref = dec0.decode_packet(exact.encode_frame(f, k, k)).lf
+        assert abs(mean_psnr(f, full[k]) - mean_psnr(f, ref)) < 0.1, k
+    dec = Decoder(header)
+    dec.decode_packet(packets[0])
+    lossy = dec.decode_packet(packets[2])  # frame 1 lost: frame 0's maps stand in
+    assert dec.gain_fallbacks == 1
+    assert abs(mean_psnr(clip[2], lossy.lf) - mean_psnr(clip[2], full[2])) < 0.5
