@@ -112,3 +112,30 @@ def test_a_video_sends_deltas_and_a_lost_one_falls_back():
     lossy = dec.decode_packet(packets[2])  # frame 1 lost: frame 0's maps stand in
     assert dec.gain_fallbacks == 1
     assert abs(mean_psnr(clip[2], lossy.lf) - mean_psnr(clip[2], full[2])) < 0.5
+
+
+def test_mutated_payloads_decode_or_raise_bitstream_errors(shaded_gains):
+    """Payload bytes past the packet CRC's protection (a writer's bug, a hostile file with a
+    recomputed CRC): every mutation decodes to finite positive gains or raises a
+    BitstreamError, never another exception."""
+    tracker = GainTracker()
+    payloads = [tracker.encode(g, k) for k, g in enumerate(shaded_gains[:2])]
+    rng = np.random.default_rng(7)
+    outcomes = {"decoded": 0, "rejected": 0}
+    for _ in range(300):
+        data = bytearray(payloads[int(rng.integers(2))])
+        if rng.random() < 0.5:
+            for _ in range(int(rng.integers(1, 4))):
+                data[int(rng.integers(len(data)))] ^= 1 << int(rng.integers(8))
+        else:
+            data = data[: int(rng.integers(len(data)))]
+        dec = GainDecoder()
+        dec.decode(payloads[0], VIEWS, frame=0)
+        try:
+            g = dec.decode(bytes(data), VIEWS, frame=1)
+        except BitstreamError:
+            outcomes["rejected"] += 1
+            continue
+        assert np.isfinite(g).all() and (g > 0).all()
+        outcomes["decoded"] += 1
+    assert outcomes["rejected"] > 100 and outcomes["decoded"] + outcomes["rejected"] == 300
