@@ -42,7 +42,8 @@ def synthetic_source(frames: int = 24, views: int = 7, size: tuple[int, int] = (
     Rendering costs ~0.4 s a frame at 7x7x375x540, more than the whole codec, so with
     ``cache`` the first run writes the frames it renders to :func:`cache_dir` (a raw
     ``.npy``, 30 MB a frame, renamed into place only when complete) and later runs read
-    them back memory-mapped: the source is then never the pipeline's bottleneck.
+    them back memory-mapped (read-only frames): the source is then never the pipeline's
+    bottleneck.
     """
     from lfstream.synth import SynthConfig, iter_clip
 
@@ -58,8 +59,11 @@ def synthetic_source(frames: int = 24, views: int = 7, size: tuple[int, int] = (
         except (OSError, ValueError):
             clip = None
         if clip is not None and clip.shape == shape and clip.dtype == np.uint8:
-            for frame in clip:
-                yield np.array(frame)
+            # read-only views of the mapped file, not copies: a 30 MB copy a frame page-faults
+            # a fresh buffer, and beside the pipeline's other threads those faults cost
+            # 20-55 ms of system time a frame (measured per thread); the views fault in
+            # page-cache pages only
+            yield from clip
             return
     store = None
     if path is not None:
