@@ -51,3 +51,36 @@ def test_cli_encode_and_stream_take_bpp(scene, tmp_path, capsys):
     assert abs(s["bpp"] - 0.12) / 0.12 <= 0.3  # chosen on the first frame, the second may differ
     with pytest.raises(SystemExit):
         main(["encode", str(tmp_path / "clip.npy"), "-o", str(tmp_path / "d.lfs"), "--bpp", "0.04", "--quality", "20"])
+
+
+def test_quality_search_finds_the_bisection_bracket_in_fewer_probes():
+    """The interpolating search returns exactly plain bisection's bracket for any growing
+    size curve (plateaus included, targets beyond either end) and probes less."""
+    from lfstream.codec.jpeg import QUALITY_RANGE
+    from lfstream.codec.rate import _bisect_quality
+
+    def plain(size, target):
+        lo, hi = QUALITY_RANGE
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            lo, hi = (mid, hi) if size(mid) <= target else (lo, mid)
+        return lo, hi
+
+    rng = np.random.default_rng(3)
+    probes = {"plain": [], "search": []}
+    for trial in range(300):
+        steps = np.exp(rng.normal(0, 0.15 if trial % 2 else 0.6, 100)) * rng.uniform(0.005, 0.05)
+        if trial % 5 == 0:
+            steps[rng.integers(0, 100, 10)] = 0.0  # equal sizes at neighbouring qualities
+        sizes = np.exp(np.cumsum(steps) + 7.0)
+        target = float(np.exp(rng.uniform(np.log(sizes[0]) - 0.5, np.log(sizes[-1]) + 0.5)))
+        calls = {"plain": set(), "search": set()}
+
+        def sized(name, calls=calls, sizes=sizes):
+            return lambda q: (calls[name].add(q), sizes[q - 1])[1]
+
+        assert _bisect_quality(sized("search"), target) == plain(sized("plain"), target), trial
+        for name in probes:
+            probes[name].append(len(calls[name]))
+    assert np.mean(probes["search"]) < 0.8 * np.mean(probes["plain"]), {k: np.mean(v) for k, v in probes.items()}
+    assert max(probes["search"]) <= 10
