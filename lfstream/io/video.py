@@ -107,7 +107,7 @@ class VideoWriter:
 
     def __init__(self, path: str | os.PathLike, fps: float = 30.0, lossless: bool = True, crf: int = 18,
                  metadata: dict[str, str] | None = None, preset: str = "medium", threads: int | None = None,
-                 low_delay: bool = False) -> None:
+                 low_delay: bool = False, fast_search: bool = False) -> None:
         self.path = Path(path)
         ext = self.path.suffix.lower()
         if ext not in VIDEO_EXTS + (".gif",):
@@ -123,6 +123,10 @@ class VideoWriter:
         # encode each frame as it comes (measured: same CPU, -2 % bytes at crf - 1, flush
         # 300 -> 50 ms)
         self._low_delay = low_delay
+        # x264's diamond motion search and its quickest sub-pixel refinement (me=dia, subme=1):
+        # measured on 13 focal planes of 376 x 540 at veryfast, crf 17, low delay: 40-45 ->
+        # 28-31 ms of CPU a frame, -2 % bytes, -0.02 dB
+        self._fast_search = fast_search
         self._container = None
         self._stream = None
         self._size: tuple[int, int] | None = None
@@ -145,8 +149,10 @@ class VideoWriter:
             # (readers crop it back, see iter_video_frames)
             pix_fmt = "yuv420p"
             codec, options = "libx264", {"crf": str(self._crf), "preset": self._preset}
-            if self._low_delay:
-                options["x264-params"] = "rc-lookahead=1:bframes=1"
+            params = (["rc-lookahead=1", "bframes=1"] if self._low_delay else []) + (
+                ["me=dia", "subme=1"] if self._fast_search else [])
+            if params:
+                options["x264-params"] = ":".join(params)
         if self._threads is not None and codec != "gif":
             options = {**options, "threads": str(int(self._threads))}
         ph, pw = (h + h % 2, w + w % 2) if pix_fmt == "yuv420p" else (h, w)

@@ -45,12 +45,13 @@ def test_video_i420_pads_by_edge_replication(rng):
             rgb_to_video_i420(img, size)
 
 
-@pytest.mark.parametrize("low_delay", [False, True])
-def test_low_delay_writer_keeps_up_and_round_trips(tmp_path, rng, low_delay):
+@pytest.mark.parametrize("low_delay, fast_search", [(False, False), (True, False), (True, True)])
+def test_low_delay_writer_keeps_up_and_round_trips(tmp_path, rng, low_delay, fast_search):
     base = _smooth_rgb(rng, 75, 100)
     frames = [np.roll(base, 2 * k, axis=1) for k in range(8)]
-    path = tmp_path / f"clip_{low_delay}.mp4"
-    w = VideoWriter(path, lossless=False, crf=17, preset="veryfast", threads=1, low_delay=low_delay)
+    path = tmp_path / f"clip_{low_delay}_{fast_search}.mp4"
+    w = VideoWriter(path, lossless=False, crf=17, preset="veryfast", threads=1, low_delay=low_delay,
+                    fast_search=fast_search)
     for f in frames:
         w.write(f)
     in_flight = len(frames) - w.packets
@@ -59,6 +60,10 @@ def test_low_delay_writer_keeps_up_and_round_trips(tmp_path, rng, low_delay):
     # emits all but one or two as they come
     assert in_flight <= 2 if low_delay else in_flight >= 6
     assert w.packets == len(frames)
+    # x264 writes its settings into the stream (a user-data SEI): the options reached it
+    settings = path.read_bytes()
+    assert (b" rc_lookahead=1 " in settings and b" bframes=1 " in settings) == low_delay
+    assert (b" me=dia " in settings and b" subme=1 " in settings) == fast_search
     back = list(iter_video_frames(path))
     assert len(back) == len(frames)
     assert min(_psnr(a, b) for a, b in zip(frames, back)) > 35.0  # crf 17 of a noisy texture: ~37-38 dB
