@@ -38,11 +38,14 @@ class RateStats:
     bytes: int = 0
     pixels: int = 0
     frame_bpp: dict[int, float] = field(default_factory=dict)
+    frame_quality: dict[int, int] = field(default_factory=dict)  # the centre view's quality per frame
 
-    def add(self, seq: int, n_bytes: int, pixels: int) -> None:
+    def add(self, seq: int, n_bytes: int, pixels: int, quality: int | None = None) -> None:
         self.bytes += n_bytes
         self.pixels += pixels
         self.frame_bpp[seq] = n_bytes * 8 / float(pixels)
+        if quality is not None:
+            self.frame_quality[seq] = int(quality)
 
 
 @dataclass
@@ -117,6 +120,8 @@ def build_summary(*, wall_s: float, warmup_s: float = 0.0, frames: int, stages: 
         k = row["frame"]
         if k in rate.frame_bpp:
             row["bpp"] = round(rate.frame_bpp[k], 6)
+        if k in rate.frame_quality:
+            row["quality"] = rate.frame_quality[k]
         if k in ssim_of:
             row["mssim"] = round(ssim_of[k], 6)
         if k in quality.stack_psnr:

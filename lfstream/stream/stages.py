@@ -204,12 +204,20 @@ class EncoderStage(ConsumerStage):
                                           preset=self.config.preset)
             self.encoder = Encoder(quality=choice.quality, depth_hint=choice.depth_hint, preset=choice.preset,
                                    hint_options=choice.hint_options, residual=choice.residual)
+        pixels = int(np.prod(lf.shape[:4]))
         if not self.started:
             self.channel.send_header(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
             self.started = True
+        elif self.config.bpp is not None and self.rate.frame_bpp:
+            # later frames cost less than the key frame rate control measured: follow the budget
+            from lfstream.codec.rate import follow_rate
+
+            last = self.rate.frame_bpp[max(self.rate.frame_bpp)] * pixels
+            self.encoder.quality = follow_rate(self.encoder.quality, self.config.bpp, 8.0 * self.rate.bytes,
+                                               self.rate.pixels, last, pixels)
         packet = self.encoder.encode_frame(lf, item.seq, int(round(item.seq * 1e6 / self.config.fps)), self.present)
-        self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain) + len(packet.residual),
-                      int(np.prod(lf.shape[:4])))
+        self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain) + len(packet.residual), pixels,
+                      self.encoder.quality)
         return packet
 
     def forward(self, packet: Packet) -> bool:

@@ -84,3 +84,45 @@ def test_quality_search_finds_the_bisection_bracket_in_fewer_probes():
             probes[name].append(len(calls[name]))
     assert np.mean(probes["search"]) < 0.8 * np.mean(probes["plain"]), {k: np.mean(v) for k, v in probes.items()}
     assert max(probes["search"]) <= 10
+
+
+def test_follow_rate_moves_the_quality_toward_the_budget():
+    from lfstream.codec.jpeg import QUALITY_RANGE
+    from lfstream.codec.rate import FOLLOW_DEADBAND, FOLLOW_MAX_STEP, follow_rate
+
+    px = 1000
+    # on budget (within the dead band): unchanged
+    assert follow_rate(50, 0.01, spent_bits=10.0, done_pixels=px, last_bits=10.0 * (1 + FOLLOW_DEADBAND / 2),
+                       frame_pixels=px) == 50
+    # under budget: up, by a step for a few percent, by at most FOLLOW_MAX_STEP for much more
+    assert follow_rate(50, 0.01, spent_bits=9.0, done_pixels=px, last_bits=10.5, frame_pixels=px) == 51
+    assert follow_rate(50, 0.01, spent_bits=2.0, done_pixels=px, last_bits=2.0, frame_pixels=px) == 50 + FOLLOW_MAX_STEP
+    # over budget: down; the budget already spent: the largest step down; the range's ends hold
+    assert follow_rate(50, 0.01, spent_bits=12.0, done_pixels=px, last_bits=12.0, frame_pixels=px) < 50
+    assert follow_rate(50, 0.01, spent_bits=30.0, done_pixels=px, last_bits=30.0, frame_pixels=px) == 50 - FOLLOW_MAX_STEP
+    assert follow_rate(QUALITY_RANGE[1], 0.01, 2.0, px, 2.0, px) == QUALITY_RANGE[1]
+    assert follow_rate(QUALITY_RANGE[0], 0.01, 30.0, px, 30.0, px) == QUALITY_RANGE[0]
+
+
+def test_a_stream_under_a_budget_lands_on_it_though_later_frames_cost_less(monkeypatch):
+    """Rate control measures the first (key) frame; delta hints and gain maps make the
+    later ones cheaper, and the stream's follower raises the quality to spend the budget."""
+    import lfstream.codec.rate as rate
+    from lfstream.stream import Pipeline, StreamConfig
+    from lfstream.stream.sources import synthetic_source
+
+    frames = list(synthetic_source(frames=12, views=5, size=(96, 128), seed=12, cache=False))
+    target = 0.1
+
+    def run():
+        return Pipeline(iter(frames), StreamConfig(bpp=target, refocus="none", save=(), preset="fast",
+                                                   mssim_every=0)).run()
+
+    s = run()
+    qualities = [row["quality"] for row in s["per_frame"]]
+    assert abs(s["bpp"] - target) / target <= RATE_TOLERANCE, (s["bpp"], qualities)
+    assert qualities[-1] > qualities[0]  # it followed the budget up
+    with monkeypatch.context() as m:  # the first frame's choice kept, as before the follower
+        m.setattr(rate, "FOLLOW_MAX_STEP", 0)
+        kept = run()
+    assert kept["bpp"] < 0.85 * target  # the later frames' deltas: 20-30 % under
