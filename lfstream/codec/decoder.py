@@ -20,6 +20,7 @@ import numpy as np
 from lfstream.codec.bitstream import CODEC_JPEG, Limits, Packet, StreamHeader, iter_packets, read_header
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
+from lfstream.codec.jpeg import deblock_jpeg, jpeg_quality_scale
 from lfstream.codec.residual import apply_residual
 from lfstream.codec.shading import GainDecoder, GainReferenceError, apply_gains
 from lfstream.codec.warp import warp_views, warp_views_per_view
@@ -27,11 +28,12 @@ from lfstream.errors import BitstreamError, LFFileError, LFValueError
 
 DEPTH_MODES = ("auto", "hint", "flat", "net")
 HANCE_MODES = ("auto", "on", "off")
-# "auto" runs JPEG-Hance only up to this JPEG quality per preset: above it the measured mean
-# PSNR gain on the real samples' centre views (seahorse, HCI dino/cotton) is below 0.1 dB or
-# negative (bench/networks.py: fast +0.32/+0.18/-0.14 dB at q10/30/50; paper +0.52 at q70,
-# -1.35 at q90).
-HANCE_MAX_QUALITY = {"fast": 30, "paper": 70}
+# "auto" runs JPEG-Hance only up to this JPEG quality per preset, where it was measured to
+# beat what it replaces. paper: +0.52 dB at q70, -1.35 at q90 (bench/networks.py, seahorse
+# and HCI dino/cotton). fast: never: the classical post-filter (codec.jpeg.deblock_jpeg, on
+# by default) gains +0.38..+1.11 dB at q10/30/50 on seahorse, dino, cotton, bikes and
+# translucent where the fast network gains -0.34..+0.43.
+HANCE_MAX_QUALITY = {"fast": 0, "paper": 70}
 #: Frames per network batch the decoder accepts.
 BATCH_RANGE = (1, 256)
 
@@ -62,6 +64,10 @@ class Decoder:
             ``"on"`` or ``"off"``.
         device: where the networks run (``"cpu"`` or ``"cuda"``).
         preset: network preset whose shipped weights are used.
+        deblock: the post-filter of JPEG centre views (:func:`lfstream.codec.jpeg.deblock_jpeg`,
+            strength from each JPEG's own quantisation table) where JPEG-Hance does not run
+            (the network takes the raw JPEG). It is part of the prediction a residual layer
+            corrects, so ``False`` decodes a residual stream's prediction alone.
     """
 
     header: StreamHeader
@@ -70,6 +76,7 @@ class Decoder:
     hance: str = "auto"
     device: str = "cpu"
     preset: str = "fast"
+    deblock: bool = True
 
     def __post_init__(self) -> None:
         if self.depth not in DEPTH_MODES:
@@ -116,11 +123,12 @@ class Decoder:
     def applies_residual(self) -> bool:
         """Whether a residual layer is added: only to the prediction the encoder computed it
         against — the hint's warp (the flat one for a stream without a hint), occlusion-aware,
-        with the gains, without JPEG-Hance. ``depth="flat"``/``"net"`` or ``hance="on"`` decode
-        the prediction alone (counted in :attr:`residual_skipped`)."""
+        with the gains, without JPEG-Hance, a JPEG centre view post-filtered. ``depth="flat"``/
+        ``"net"``, ``hance="on"`` or ``deblock=False`` on a JPEG stream decode the prediction
+        alone (counted in :attr:`residual_skipped`)."""
         reference_depth = "hint" if self.header.has_hint else "flat"
         return (self.header.has_residual and self.depth in ("auto", reference_depth) and self.occlusion
-                and self._hance is None)
+                and self._hance is None and (self.deblock or self.header.codec != CODEC_JPEG))
 
     def decode_packet(self, packet: Packet) -> DecodedFrame:
         return self.decode_batch([packet])[0]
@@ -141,6 +149,11 @@ class Decoder:
             from lfstream.models.jpeg_hance import restore_images
 
             centres = restore_images(centres, self._hance, self.device)
+        elif self.deblock and self.header.codec == CODEC_JPEG:
+            for k, p in enumerate(packets):
+                scale = jpeg_quality_scale(p.image)
+                if scale is not None:
+                    centres[k] = deblock_jpeg(centres[k], scale)
         return centres
 
     def reconstruct(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray) -> DecodedFrame:

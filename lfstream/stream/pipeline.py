@@ -16,7 +16,8 @@ Skips (each switchable, each reported in the summary with what it saved and cost
       (1st..99th percentile of the decoded disparity, widened by ``plane_margin``) are
       rendered by a cheap path (shift-and-sum at half resolution, upsampled) and flagged;
   (c) JPEG-Hance runs only at JPEG qualities where it was measured to help (the decoder's
-      ``hance="auto"``);
+      ``hance="auto"``: the paper preset up to q70; elsewhere the classical post-filter
+      :func:`lfstream.codec.jpeg.deblock_jpeg` measured better);
   (d) rendering the focal stack straight from centre view + disparity is not offered: each
       plane would need one scattered (gathered) sample of the centre per view and pixel,
       13 x 49 per pixel for the default planes of a 7x7 grid (~130 M scalar gathers, over a
