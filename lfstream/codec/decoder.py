@@ -1,4 +1,5 @@
-"""The decoder (seed chapter 3): JPEG decode, JPEG-Hance where it helps, a disparity per
+"""The decoder (seed chapter 3): JPEG decode, its post-filter (or JPEG-Hance where that
+measured better), a disparity per
 frame — from the hint (``depth="hint"``), zero (``depth="flat"``: every view is the centre
 view) or Depth-Net's per-view maps (``depth="net"``) — and the backward warp of the centre
 view into every view with occlusion handling (:mod:`lfstream.codec.warp`), then the
