@@ -23,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-hance", action="store_true", help="skip JPEG-Hance (default: run it where it helps)")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto",
                    help="JPEG-Hance: auto (by the stream's JPEG quality, measured threshold), on or off")
+    p.add_argument("--no-deblock", action="store_true",
+                   help="skip the post-filter of JPEG centre views (default: on; a residual layer then is not applied)")
     p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
     p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1, help="frames per network batch")
     p.add_argument("--disparity-out", type=Path, help="folder for the centre-view disparity of each frame (PFM)")
@@ -45,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
         with open(args.input, "rb") as fh:
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
-                                 device=args.device, batch=args.batch):
+                                 device=args.device, batch=args.batch, deblock=not args.no_deblock):
                 frames.append(f.lf)
                 if args.disparity_out is not None:
                     write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)

@@ -249,15 +249,15 @@ class Decoder:
 
 def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
                 max_frames: int | None = None, hance: str = "auto", device: str = "cpu",
-                batch: int = 1) -> Iterator[DecodedFrame]:
+                batch: int = 1, deblock: bool = True) -> Iterator[DecodedFrame]:
     """Decodes a stream frame by frame (networks batched over ``batch`` frames); every
     complete frame before a damaged packet is yielded, then :class:`BitstreamError` names
-    the damaged frame."""
+    the damaged frame. ``deblock``: :attr:`Decoder.deblock`."""
     lo, hi = BATCH_RANGE
     if not isinstance(batch, int) or not lo <= batch <= hi:
         raise LFValueError(f"batch: an integer in {lo}..{hi}, got {batch!r}")
     header = read_header(fh, limits)
-    dec = Decoder(header, depth=depth, occlusion=occlusion, hance=hance, device=device)
+    dec = Decoder(header, depth=depth, occlusion=occlusion, hance=hance, device=device, deblock=deblock)
     pending: list[Packet] = []
     try:
         for k, packet in enumerate(iter_packets(fh, header, limits)):
@@ -277,8 +277,8 @@ def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits 
 
 
 def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
-           hance: str = "auto", device: str = "cpu") -> np.ndarray:
-    """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8.
+           hance: str = "auto", device: str = "cpu", deblock: bool = True) -> np.ndarray:
+    """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8 (``deblock``: :attr:`Decoder.deblock`).
 
     Raises:
         LFStreamError: corrupt, truncated or hostile input (the error names the frame; the
@@ -288,7 +288,8 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
         raise LFValueError(f"data: expected bytes, got {type(data).__name__}")
     frames: list[np.ndarray] = []
     try:
-        for f in iter_decode(io.BytesIO(bytes(data)), depth, occlusion, limits, hance=hance, device=device):
+        for f in iter_decode(io.BytesIO(bytes(data)), depth, occlusion, limits, hance=hance, device=device,
+                             deblock=deblock):
             frames.append(f.lf)
     except BitstreamError as exc:
         exc.partial = np.stack(frames) if frames else None  # type: ignore[attr-defined]

@@ -62,3 +62,19 @@ def test_the_decoder_filters_jpeg_centres_unless_told_not_to():
     np.testing.assert_array_equal(off, raw)
     np.testing.assert_array_equal(on, deblock_jpeg(raw, jpeg_quality_scale(packets[0].image)))
     assert not np.array_equal(on, off)
+
+
+def test_cli_decode_no_deblock_gives_the_raw_jpeg_centre(tmp_path):
+    import lfstream
+    from lfstream.cli import main
+    from lfstream.codec.bitstream import split_stream
+
+    lf = synth_clip(1, 3, (48, 64), seed=6).lf[0]
+    data = lfstream.encode(lf, quality=30)
+    (tmp_path / "a.lfs").write_bytes(data)
+    assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "raw.npy"), "--no-deblock"]) == 0
+    assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "filtered.npy")]) == 0
+    raw, filtered = np.load(tmp_path / "raw.npy"), np.load(tmp_path / "filtered.npy")
+    jpeg = split_stream(data)[1][0].image
+    np.testing.assert_array_equal(raw[0, 1, 1], decode_jpeg(jpeg, (48, 64)))
+    np.testing.assert_array_equal(filtered[0, 1, 1], deblock_jpeg(decode_jpeg(jpeg, (48, 64)), jpeg_quality_scale(jpeg)))
