@@ -456,22 +456,43 @@ def winner_subpixel(cost, shifts, out):  # pragma: no cover - compiled
 
 
 @numba.njit(**_ROW)
-def _jbu_row(small, gsmall, guide_row, scale, lut, y, out_row):  # pragma: no cover - compiled
+def _jbu_taps(n_out, n_small, scale):  # pragma: no cover - compiled
+    """Per output sample of one axis: the first of its four map samples (``k - 1``, may be
+    -1) and their tent weights (radius 2 map pixels; 0 for samples outside the map).
+    Computed once per axis instead of per tap: the same float64 expressions as the per-tap
+    form, so the weights (and the output) are identical to the bit."""
+    first = np.empty(n_out, np.int64)
+    weights = np.zeros((n_out, 4), np.float32)
+    for i in range(n_out):
+        p = min(max((i + 0.5) / scale - 0.5, 0.0), n_small - 1.0)
+        k = int(np.floor(p))
+        first[i] = k - 1
+        for t in range(4):
+            j = k - 1 + t
+            if 0 <= j < n_small:
+                weights[i, t] = np.float32(max(0.0, 1.0 - abs(p - j) * 0.5))
+    return first, weights
+
+
+@numba.njit(**_ROW)
+def _jbu_row(small, gsmall, guide_row, lut, y0, wy, x0, wx, out_row):  # pragma: no cover - compiled
     hs, ws = small.shape
-    py = min(max((y + 0.5) / scale - 0.5, 0.0), hs - 1.0)
-    ky = int(np.floor(py))
     for x in range(out_row.shape[0]):
-        px = min(max((x + 0.5) / scale - 0.5, 0.0), ws - 1.0)
-        kx = int(np.floor(px))
         g = np.int32(guide_row[x])  # signed: uint8 differences must not wrap
         acc = np.float32(0.0)
         wsum = np.float32(0.0)
         sacc = np.float32(0.0)
         ssum = np.float32(0.0)
-        for iy in range(max(ky - 1, 0), min(ky + 3, hs)):
-            wy = np.float32(max(0.0, 1.0 - abs(py - iy) * 0.5))
-            for ix in range(max(kx - 1, 0), min(kx + 3, ws)):
-                sw = wy * np.float32(max(0.0, 1.0 - abs(px - ix) * 0.5))
+        kx = x0[x]
+        for ty in range(4):
+            iy = y0 + ty
+            if iy < 0 or iy >= hs:
+                continue
+            for tx in range(4):
+                ix = kx + tx
+                if ix < 0 or ix >= ws:
+                    continue
+                sw = wy[ty] * wx[x, tx]
                 val = small[iy, ix]
                 diff = g - np.int32(gsmall[iy, ix])
                 wt = sw * lut[diff if diff >= 0 else -diff]
@@ -489,16 +510,19 @@ def joint_upsample(small, gsmall, guide, scale, lut, out):  # pragma: no cover -
     Each output pixel averages the 4 x 4 nearest map samples, weighted by a tent of radius 2
     map pixels around its position and by ``lut[|guide - gsmall|]``, the similarity of its
     grey level to the grey level of the block each sample came from: depth edges snap to
-    picture edges. Where every weight vanishes it falls back to the spatial weights.
+    picture edges. Where every weight vanishes it falls back to the spatial weights. The
+    tent weights are computed once per row and per column (:func:`_jbu_taps`).
 
     Args:
         small: (hs, ws) float32 map; gsmall: (hs, ws) uint8 block means of the guide.
         guide: (H, W) uint8; scale: float32 map pixel size in output pixels.
         lut: (256,) float32 range weights; out: (H, W) float32, overwritten.
     """
+    hs, ws = small.shape
+    y0, wy = _jbu_taps(out.shape[0], hs, scale)
+    x0, wx = _jbu_taps(out.shape[1], ws, scale)
     for y in numba.prange(out.shape[0]):
-        _jbu_row(small, gsmall, guide[y], scale, lut, y, out[y])
-
+        _jbu_row(small, gsmall, guide[y], lut, y0[y], wy[y], x0, wx, out[y])
 
 
 # YCbCr -> RGB (BT.601 full range, the inverse of lfstream.codec.intra.rgb_to_i420) in
