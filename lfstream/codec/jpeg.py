@@ -73,8 +73,8 @@ def deblock_jpeg(img: np.ndarray, scale: float) -> np.ndarray:
     from 10 to 95 on every one (q50: +0.33 to +0.91 dB, mean +0.54; SSIM +0.002 to +0.02;
     q95: +0.02 to +0.2 dB), and it beats the shipped JPEG-Hance fast network on each scene
     it was measured against (q10 / 30 / 50: +0.50..+0.83 / +0.45..+1.11 / +0.38..+0.91 dB
-    against -0.08..+0.43 / -0.34..+0.25); ~2 ms a 375 x 540 view. The strength was chosen
-    among 0.15, 0.2 and 0.25 on those views.
+    against -0.08..+0.43 / -0.34..+0.25); 2.5 ms a 375 x 540 view on two threads (5 on one).
+    The strength was chosen among 0.15, 0.2 and 0.25 on those views.
 
     Shape:
         - img: ``(H, W, 3)`` uint8; output the same
@@ -85,7 +85,9 @@ def deblock_jpeg(img: np.ndarray, scale: float) -> np.ndarray:
 
 
 def jpeg_roundtrip(img: np.ndarray, quality: int) -> np.ndarray:
-    """What the decoder sees of a uint8 RGB image sent at ``quality`` (training and benchmarks)."""
+    """A uint8 RGB image through JPEG at ``quality`` and back, unfiltered: what JPEG-Hance
+    takes (training and benchmarks); the decoder's default also post-filters it
+    (:func:`deblock_jpeg`)."""
     return decode_jpeg(encode_jpeg(img, quality), img.shape[:2])
 
 

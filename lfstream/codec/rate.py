@@ -3,15 +3,19 @@
 The encoder's knobs are the preset (the centre view's codec: JPEG or AV1), its quality and
 whether the depth hint is sent. The hint and the gain maps do not depend on the centre
 view's coding, so they are computed once per frame; the size at every quality then costs
-one centre-view encode per frame, and a bisection finds, for every preset with the hint and
-without it, the quality whose stream is closest to the target. The candidates are decoded
+one centre-view encode per frame, and a search (:func:`_quality_bracket`: bisection's bracket
+in fewer encodes) finds, for every preset with the hint and without it, the quality whose
+stream is closest to the target. The candidates are decoded
 on the first frame and the one with the higher MPSNR (over the views that exist) wins: the
 encoder has the whole light field, so it can measure instead of guess.
 
 The residual layer (:mod:`lfstream.codec.residual`) is a candidate too: the centre view takes
-a share of the target (:data:`RESIDUAL_SHARES`), the residual's quality is bisected to fill
-the rest. Measured on lytro_bikes at 0.08 bpp, a centre view at about half the budget was
-best (35.1 dB; a quarter 34.8, two thirds 35.0, nine tenths 34.1).
+a share of the target (:data:`RESIDUAL_SHARES`), the residual's quality is searched the same
+way to fill the rest. Measured on lytro_bikes at 0.08 bpp, a centre view at about half the
+budget was best (35.1 dB; a quarter 34.8, two thirds 35.0, nine tenths 34.1).
+
+A stream sees one frame at a time: it chooses on its first frame and then follows the
+budget frame by frame (:func:`follow_rate`).
 """
 
 from __future__ import annotations
@@ -78,7 +82,7 @@ def _at_quality(header: StreamHeader, packets: list[Packet], quality: int, image
     return at_q, [replace(p, image=img) for p, img in zip(packets, images)]
 
 
-def _bisect_quality(size, target_bytes: float) -> tuple[int, int]:
+def _quality_bracket(size, target_bytes: float) -> tuple[int, int]:
     """The bracket ``(lo, hi)``, ``hi = lo + 1``, of qualities around ``target_bytes`` over
     :data:`QUALITY_RANGE`: ``size(lo) <= target_bytes < size(hi)`` where the range allows
     (``size(q)`` grows with ``q``; it caches what it encodes). The same bracket as plain
@@ -130,7 +134,7 @@ def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeade
             cache[q] = (len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved), images)
         return cache[q][0]
 
-    q = min(_bisect_quality(size, target_bytes), key=lambda k: abs(size(k) - target_bytes))
+    q = min(_quality_bracket(size, target_bytes), key=lambda k: abs(size(k) - target_bytes))
     return q, size(q), cache[q][1]
 
 
@@ -160,7 +164,7 @@ def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: Strea
 
     if size(QUALITY_RANGE[0]) > target_bytes * (1 + RATE_TOLERANCE):
         return None
-    fits = [r for r in _bisect_quality(size, target_bytes) if size(r) <= target_bytes * (1 + RATE_TOLERANCE)]
+    fits = [r for r in _quality_bracket(size, target_bytes) if size(r) <= target_bytes * (1 + RATE_TOLERANCE)]
     r = min(fits, key=lambda k: abs(size(k) - target_bytes))
     meta = {**at_q.meta, "residual": {"codec": "av1", "quality": r, "svt_preset": RESIDUAL_SPEED[preset]}}
     with_res = replace(at_q, meta=meta)

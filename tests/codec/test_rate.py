@@ -57,7 +57,7 @@ def test_quality_search_finds_the_bisection_bracket_in_fewer_probes():
     """The interpolating search returns exactly plain bisection's bracket for any growing
     size curve (plateaus included, targets beyond either end) and probes less."""
     from lfstream.codec.jpeg import QUALITY_RANGE
-    from lfstream.codec.rate import _bisect_quality
+    from lfstream.codec.rate import _quality_bracket
 
     def plain(size, target):
         lo, hi = QUALITY_RANGE
@@ -79,7 +79,7 @@ def test_quality_search_finds_the_bisection_bracket_in_fewer_probes():
         def sized(name, calls=calls, sizes=sizes):
             return lambda q: (calls[name].add(q), sizes[q - 1])[1]
 
-        assert _bisect_quality(sized("search"), target) == plain(sized("plain"), target), trial
+        assert _quality_bracket(sized("search"), target) == plain(sized("plain"), target), trial
         for name in probes:
             probes[name].append(len(calls[name]))
     assert np.mean(probes["search"]) < 0.8 * np.mean(probes["plain"]), {k: np.mean(v) for k, v in probes.items()}
