@@ -93,7 +93,9 @@ def rate_control_curve(lf: np.ndarray, quick: bool) -> list[dict]:
         header = split_stream(data)[0]
         p = _point(lf, data, rec, target, t_enc, t_dec)
         p.update({"target_bpp": target, "preset": header.meta.get("preset", "fast"), "quality": header.quality,
-                  "hint": header.has_hint, "residual": header.meta.get("residual", {}).get("quality")})
+                  "hint": header.has_hint, "residual": header.meta.get("residual", {}).get("quality"),
+                  "residual_mode": header.meta.get("residual", {}).get("mode", "prediction") if header.has_residual
+                  else None})
         pts.append(p)
     return pts
 

@@ -10,6 +10,7 @@ from pathlib import Path
 from lfstream.cli._common import add_read_options, emit, float_in, int_in, load_from_args
 from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
+from lfstream.codec.residual import RESIDUAL_MODES
 
 HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre view + depth hint)"
 
@@ -27,6 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="quality 1..100 of the residual layer: every view's prediction "
                    "error coded as one AV1 sequence "
                    "(more bits, quality that keeps rising with rate; default: none, --bpp decides itself)")
+    p.add_argument("--residual-mode", choices=RESIDUAL_MODES, default="prediction",
+                   help="what the residual layer codes: prediction (the prediction's error, the default) or views "
+                   "(the views themselves: for scenes warping cannot predict; no warp at decode)")
     hint = p.add_mutually_exclusive_group()
     hint.add_argument("--depth-hint", dest="depth_hint", action="store_true", default=True,
                       help="send the encoder's disparity estimate (the default)")
@@ -48,11 +52,15 @@ def run(args: argparse.Namespace) -> int:
     frames = frames_of(loaded.lf)
     fps = args.fps or loaded.fps or 30.0
     quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
-    residual = args.residual
-    if args.bpp is not None and residual is not None:
+    residual, residual_mode = args.residual, args.residual_mode
+    if args.bpp is not None and (residual is not None or residual_mode != "prediction"):
         from lfstream.errors import LFValueError
 
         raise LFValueError("--residual: rate control (--bpp) chooses the residual layer itself; give one or the other")
+    if residual_mode != "prediction" and residual is None:
+        from lfstream.errors import LFValueError
+
+        raise LFValueError("--residual-mode: needs --residual Q (the layer's quality)")
     if args.bpp is not None:
         from lfstream.codec.rate import choose_configuration
 
@@ -60,20 +68,23 @@ def run(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         rate = choose_configuration(frames, args.bpp, fps, loaded.present, preset=args.preset)
         quality, depth_hint, preset, residual = rate.quality, rate.depth_hint, rate.preset, rate.residual
+        residual_mode = rate.residual_mode
         stats = write_stream_file(args.output, rate.header, rate.packets)
         stats.encode_s = time.perf_counter() - t0  # the search included
     else:
         stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]),
-                            Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual), fps=fps,
+                            Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
+                                    residual_mode=residual_mode), fps=fps,
                             present=loaded.present)
     result = dataclasses.asdict(stats)
     result.update({"output": str(args.output), "bpp": bpp(stats.bytes, frames.shape),
                    "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": quality, "depth_hint": depth_hint,
-                   "preset": preset, "residual": residual, "residual_bpp": bpp(stats.residual_bytes, frames.shape)})
+                   "preset": preset, "residual": residual, "residual_mode": residual_mode if residual is not None else None,
+                   "residual_bpp": bpp(stats.residual_bytes, frames.shape)})
     if rate is not None:
         result["rate_control"] = {"target_bpp": args.bpp, "candidates": list(rate.candidates)}
     emit(args, result, lambda r: f"{r['frames']} frame(s) -> {args.output}: {r['bytes']} bytes, {r['bpp']:.5f} bpp"
          + (f" (hint {r['hint_bpp']:.5f} bpp)" if depth_hint else "") + f", {preset} q{quality}"
-         + (f", residual q{residual} ({r['residual_bpp']:.5f} bpp)" if residual is not None else "")
+         + (f", residual q{residual} {residual_mode} ({r['residual_bpp']:.5f} bpp)" if residual is not None else "")
          + f", encoded in {r['encode_s']:.3f} s")
     return 0

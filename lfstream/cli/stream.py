@@ -9,6 +9,7 @@ from lfstream.cli import _pipeline
 from lfstream.cli._common import add_read_options, float_in, int_in, read_options
 from lfstream.codec.encoder import PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
+from lfstream.codec.residual import RESIDUAL_MODES
 from lfstream.stream.config import TRANSPORTS
 
 HELP = "stream an LF video (default: the built-in synthetic clip) through the whole pipeline"
@@ -28,6 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="quality 1..100 of the residual layer: every view's prediction "
                    "error coded as one AV1 sequence "
                    "(more bits, quality that keeps rising with rate; default: none, --bpp decides itself)")
+    p.add_argument("--residual-mode", choices=RESIDUAL_MODES, default="prediction",
+                   help="what the residual layer codes: prediction (the default) or views (the views themselves)")
     p.add_argument("--frames", type=int_in((1, 1 << 20)), default=12, help="frames of the built-in clip")
     _pipeline.add_pipeline_options(p)
     add_read_options(p)
@@ -52,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             source = file_source(args.input, read_options(args))
         cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp, depth_hint=not args.no_depth_hint,
-                                        preset=args.preset, residual=args.residual, transport=args.transport,
+                                        preset=args.preset, residual=args.residual,
+                                        residual_mode=args.residual_mode, transport=args.transport,
                                         fps=source.fps or 30.0)
         pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,

@@ -598,3 +598,4 @@ def add_i420_residual(lf, planes, positions, offset):  # pragma: no cover - comp
         k = job // h
         y = job % h
         _i420_residual_row(lf[positions[k, 0], positions[k, 1], y], planes[k].ravel(), y, ph, pw, np.int32(offset))
+

@@ -4,7 +4,8 @@ frame — from the hint (``depth="hint"``), zero (``depth="flat"``: every view i
 view) or Depth-Net's per-view maps (``depth="net"``) — and the backward warp of the centre
 view into every view with occlusion handling (:mod:`lfstream.codec.warp`), then the
 per-view shading gains, and the residual layer where the stream has one (added only to the
-prediction it was computed against). The networks are pluggable stages with the shipped ``fast``
+prediction it was computed against; a residual of mode ``views`` or ``half-views`` carries
+the views themselves, so nothing is warped). The networks are pluggable stages with the shipped ``fast``
 weights; ``hance="off"`` and ``depth="flat"``/``"hint"`` are the non-learned fallbacks.
 """
 
@@ -22,7 +23,7 @@ from lfstream.codec.bitstream import CODEC_JPEG, Limits, Packet, StreamHeader, i
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
 from lfstream.codec.jpeg import deblock_jpeg, jpeg_quality_scale
-from lfstream.codec.residual import apply_residual
+from lfstream.codec.residual import VIEW_MODES, apply_residual, residual_mode
 from lfstream.codec.shading import GainDecoder, GainReferenceError, apply_gains
 from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.errors import BitstreamError, LFFileError, LFValueError
@@ -126,7 +127,8 @@ class Decoder:
         against — the hint's warp (the flat one for a stream without a hint), occlusion-aware,
         with the gains, without JPEG-Hance, a JPEG centre view post-filtered. ``depth="flat"``/
         ``"net"``, ``hance="on"`` or ``deblock=False`` on a JPEG stream decode the prediction
-        alone (counted in :attr:`residual_skipped`)."""
+        alone (counted in :attr:`residual_skipped`). A residual of mode ``views``/``half-views``
+        is applied whatever the settings: it replaces the views (:meth:`_views_only`)."""
         reference_depth = "hint" if self.header.has_hint else "flat"
         return (self.header.has_residual and self.depth in ("auto", reference_depth) and self.occlusion
                 and self._hance is None and (self.deblock or self.header.codec != CODEC_JPEG))
@@ -171,8 +173,14 @@ class Decoder:
                 self.hint_fallbacks += 1
         return self._add_residual(packet, self._warp(packet, centre, disparity, axes))
 
+    @staticmethod
+    def _views_only(packet: Packet) -> bool:
+        """Whether the packet's residual carries the views themselves: then there is nothing
+        to predict (the warp is skipped) and nothing the settings could leave out."""
+        return residual_mode(packet.residual) in VIEW_MODES
+
     def _add_residual(self, packet: Packet, frame: DecodedFrame) -> DecodedFrame:
-        if packet.residual and self.applies_residual:
+        if packet.residual and (self.applies_residual or self._views_only(packet)):
             apply_residual(frame.lf, packet.residual, packet.seq)
         elif packet.residual:
             self.residual_skipped += 1
@@ -205,6 +213,11 @@ class Decoder:
 
     def _warp(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray,
               axes: np.ndarray | None = None) -> DecodedFrame:
+        if self._views_only(packet):  # the residual replaces every view but the centre
+            u, v = self.header.views
+            lf = np.empty((u, v, *centre.shape), np.uint8)
+            lf[u // 2, v // 2] = centre
+            return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes)
         # the warp kernel multiplies the gains in as it samples (no second pass over the views)
         lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion, gains=self._gains(packet),
                         axes=axes)
@@ -234,7 +247,7 @@ class Decoder:
             d, a = self._hint_disparity(p, centre) if use_hint else (None, None)
             hints.append(d)
             axes.append(a)
-        if self._depth_net is None:
+        if self._depth_net is None or all(self._views_only(p) for p in packets):
             return [self._add_residual(p, self._warp(p, centre, hint if hint is not None else np.zeros((h, w), np.float32), a))
                     for p, centre, hint, a in zip(packets, centres, hints, axes)]
         self.residual_skipped += sum(1 for p in packets if p.residual)

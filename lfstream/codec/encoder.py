@@ -66,6 +66,11 @@ class Encoder:
         residual: quality (1..100) of the residual layer, ``None`` for none. The encoder
             then runs the decoder's prediction on every frame (it costs a decode and an AV1
             sequence encode: 150-600 ms a 7x7x375x540 frame).
+        residual_mode: what the residual codes (:data:`lfstream.codec.residual.RESIDUAL_MODES`):
+            ``prediction`` (the prediction's error), ``views`` (the views themselves, for
+            scenes warping cannot predict; no prediction is run and no gain maps are sent,
+            the decoder does not warp) or ``half-views`` (the same at half size, for the
+            lowest rates).
     """
 
     quality: int = 50
@@ -74,12 +79,16 @@ class Encoder:
     gain_grid: int = 4  # per-view brightness gains on a grid x grid mesh; 0 sends none
     preset: str = DEFAULT_PRESET
     residual: int | None = None
+    residual_mode: str = "prediction"
 
     def __post_init__(self) -> None:
         self.coding = preset_coding(self.preset)
-        if self.residual is not None:
-            from lfstream.codec.residual import check_residual_quality
+        if self.residual is not None or self.residual_mode != "prediction":
+            from lfstream.codec.residual import check_residual_mode, check_residual_quality
 
+            check_residual_mode(self.residual_mode)
+            if self.residual is None:
+                raise LFValueError(f"residual_mode {self.residual_mode!r}: needs a residual quality")
             check_residual_quality(self.residual)
         self._reference = None  # the decoder whose prediction the residual corrects
         lo, hi = QUALITY_RANGE
@@ -101,7 +110,7 @@ class Encoder:
         if self.depth_hint:
             meta["hint"] = self.hint_options.as_meta()
         if self.residual is not None:
-            meta["residual"] = {"codec": "av1", "quality": int(self.residual), "svt_preset": RESIDUAL_SPEED[self.preset]}
+            meta["residual"] = residual_meta(int(self.residual), RESIDUAL_SPEED[self.preset], self.residual_mode)
         return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint,
                             codec=self.coding.codec_id, meta=meta, has_residual=self.residual is not None)
 
@@ -126,13 +135,17 @@ class Encoder:
         if lf.shape[-1] != 3:
             raise LFValueError(f"frame {seq}: expected 3 colour channels, got {lf.shape[-1]}")
         check_finite(lf, f"frame {seq}")
+        if self.residual is not None and self.residual_mode != "prediction" and present is not None and not present.all():
+            raise LFValueError(f"frame {seq}: residual_mode {self.residual_mode!r} codes every view and "
+                               f"{int((~present).sum())} are missing; use the prediction mode, which reconstructs them")
         frame = to_uint8(np.asarray(lf))
         image = encode_centre(centre_view(frame), self.quality, self.coding)
         hint = b""
         if self.depth_hint:
             hint = self._hints.encode(frame, seq, present)
         gain = b""
-        if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1:
+        views_residual = self.residual is not None and self.residual_mode != "prediction"
+        if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1 and not views_residual:
             gains = measure_gains(frame, self.gain_grid, present=present)
             gain = self._gains.encode(gains if shading_present(gains) else None, seq)
         packet = Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
@@ -155,13 +168,26 @@ class Encoder:
         return self._reference.decode_packet(packet).lf
 
     def add_residual(self, packet: Packet, frame: np.ndarray, quality: int) -> Packet:
-        """``packet`` with a residual layer at ``quality`` against its prediction."""
+        """``packet`` with a residual layer at ``quality`` against its prediction (in mode
+        ``views``: the views themselves)."""
         from dataclasses import replace
 
         from lfstream.codec.residual import encode_residual
 
-        prediction = self.predict(packet, frame.shape[:2], frame.shape[2:4])
-        return replace(packet, residual=encode_residual(frame, prediction, quality, RESIDUAL_SPEED[self.preset]))
+        prediction = None
+        if self.residual_mode == "prediction":
+            prediction = self.predict(packet, frame.shape[:2], frame.shape[2:4])
+        return replace(packet, residual=encode_residual(frame, prediction, quality, RESIDUAL_SPEED[self.preset],
+                                                        half=self.residual_mode == "half-views"))
+
+
+def residual_meta(quality: int, svt_preset: int, mode: str = "prediction") -> dict:
+    """The header's record of a residual layer (``mode`` only where it is not the first
+    one, so prediction streams keep their bytes)."""
+    meta = {"codec": "av1", "quality": int(quality), "svt_preset": int(svt_preset)}
+    if mode != "prediction":
+        meta["mode"] = mode
+    return meta
 
 
 @dataclass
@@ -200,6 +226,7 @@ def encode(
     bpp: float | None = None,
     preset: str | None = None,
     residual: int | None = None,
+    residual_mode: str = "prediction",
 ) -> bytes:
     """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
 
@@ -210,7 +237,8 @@ def encode(
     ``preset`` names one, the preset, and whether and how well to code the residual layer.
     ``preset``: the centre view's coding (:data:`PRESETS`; default ``fast``, the seed's
     JPEG). ``residual``: quality 1..100 of the residual layer (:mod:`lfstream.codec.residual`),
-    ``None`` (the default) for none.
+    ``None`` (the default) for none; ``residual_mode``: what it codes (``prediction`` or
+    ``views``, :attr:`Encoder.residual_mode`).
 
     Raises:
         LFStreamError: bad shape, dtype, non-finite values or parameters.
@@ -224,12 +252,12 @@ def encode(
     if bpp is not None:
         from lfstream.codec.rate import choose_configuration
 
-        if residual is not None:
+        if residual is not None or residual_mode != "prediction":
             raise LFValueError("residual: rate control (bpp) chooses the residual layer itself; give one or the other")
         # rate control encoded every frame already: its stream is the answer
         return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream()
     enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid,
-                  preset=preset or DEFAULT_PRESET, residual=residual)
+                  preset=preset or DEFAULT_PRESET, residual=residual, residual_mode=residual_mode)
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
     for t, frame in enumerate(frames):
@@ -268,4 +296,5 @@ def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tu
 
 
 __all__ = ["ENCODER_NAME", "PRESETS", "DEFAULT_PRESET", "preset_coding", "Encoder", "EncodeStats", "encode", "encode_file",
+           "residual_meta",
            "write_stream_file", "frames_of"]

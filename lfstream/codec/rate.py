@@ -14,6 +14,10 @@ a share of the target (:data:`RESIDUAL_SHARES`), the residual's quality is searc
 way to fill the rest. Measured on lytro_bikes at 0.08 bpp, a centre view at about half the
 budget was best (35.1 dB; a quarter 34.8, two thirds 35.0, nine tenths 34.1).
 
+The last candidates code the views themselves as the residual's sequence (modes ``views`` and
+``half-views``, :mod:`lfstream.codec.residual`): where warping cannot predict the scene they
+are the better stream (toys_array), elsewhere the measurement leaves them out.
+
 A stream sees one frame at a time: it chooses on its first frame and then follows the
 budget frame by frame (:func:`follow_rate`).
 """
@@ -28,6 +32,7 @@ from lfstream.codec.bitstream import Packet, StreamHeader, pack_header, pack_pac
 from lfstream.codec.hint import HintOptions
 from lfstream.codec.intra import CentreCoding, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE
+from lfstream.codec.residual import VIEW_MODES
 from lfstream.errors import LFValueError
 from lfstream.lightfield import centre_view, to_uint8
 
@@ -65,6 +70,7 @@ class RateChoice:
     preset: str = "fast"
     hint_options: HintOptions = HintOptions()  # the chosen hint's options (the default without a hint)
     residual: int | None = None  # the residual layer's quality; None: no residual
+    residual_mode: str = "prediction"  # what the residual codes (lfstream.codec.residual.RESIDUAL_MODES)
 
     def stream(self) -> bytes:
         """The chosen ``.lfs`` stream."""
@@ -144,7 +150,7 @@ def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: Strea
     """The residual quality whose stream (centre at ``quality``) is closest to the target
     without passing it by more than :data:`RATE_TOLERANCE`; ``None`` when even quality 1
     does not fit."""
-    from lfstream.codec.encoder import RESIDUAL_SPEED, Encoder
+    from lfstream.codec.encoder import RESIDUAL_SPEED, Encoder, residual_meta
     from lfstream.codec.residual import encode_residual
 
     at_q, moved = _at_quality(header, packets, quality, images, coding)
@@ -166,9 +172,36 @@ def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: Strea
         return None
     fits = [r for r in _quality_bracket(size, target_bytes) if size(r) <= target_bytes * (1 + RATE_TOLERANCE)]
     r = min(fits, key=lambda k: abs(size(k) - target_bytes))
-    meta = {**at_q.meta, "residual": {"codec": "av1", "quality": r, "svt_preset": RESIDUAL_SPEED[preset]}}
+    meta = {**at_q.meta, "residual": residual_meta(r, RESIDUAL_SPEED[preset])}
     with_res = replace(at_q, meta=meta)
     return r, with_res, [replace(p, residual=x) for p, x in zip(moved, cache[r][1])]
+
+
+def _views_candidate(frames: np.ndarray, present: np.ndarray | None, preset: str, fps: float,
+                     target_bytes: float, hint: bool, mode: str = "views") -> tuple[int, StreamHeader, list[Packet]] | None:
+    """The stream whose residual codes the views themselves (mode ``views``, no gains; the
+    hint only with ``hint``: it does not shape the views, and costs toys_array 0.003 bpp)
+    closest to the target without passing it by more than :data:`RATE_TOLERANCE`:
+    the centre view and the views' sequence at one quality (the centre is one view among
+    U * V: a better centre would buy 1/(U * V) of the MPSNR), searched like the centre's.
+    ``None`` when even quality 1 does not fit."""
+    from lfstream.codec.encoder import Encoder
+
+    cache: dict[int, tuple[int, StreamHeader, list[Packet]]] = {}
+
+    def size(q: int) -> int:
+        if q not in cache:
+            enc = Encoder(quality=q, depth_hint=hint, preset=preset, residual=q, residual_mode=mode)
+            header = enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
+            packets = [enc.encode_frame(f, t, int(round(t * 1e6 / fps)), present) for t, f in enumerate(frames)]
+            cache[q] = (len(pack_header(header)) + sum(p.size(header.version) for p in packets), header, packets)
+        return cache[q][0]
+
+    if size(QUALITY_RANGE[0]) > target_bytes * (1 + RATE_TOLERANCE):
+        return None
+    fits = [q for q in _quality_bracket(size, target_bytes) if size(q) <= target_bytes * (1 + RATE_TOLERANCE)]
+    q = min(fits, key=lambda k: abs(size(k) - target_bytes))
+    return q, cache[q][1], cache[q][2]
 
 
 def follow_rate(quality: int, target_bpp: float, spent_bits: float, done_pixels: int, last_bits: float,
@@ -198,13 +231,15 @@ def follow_rate(quality: int, target_bpp: float, spent_bits: float, done_pixels:
 
 def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, present: np.ndarray | None = None,
                          hint_options: HintOptions | None = None, gain_grid: int = 4,
-                         preset: str | None = None, residual: bool = True) -> RateChoice:
+                         preset: str | None = None, residual: bool = True, views_hint: bool = False) -> RateChoice:
     """The (preset, quality, depth hint, hint precision, residual) whose stream lands nearest
     ``target_bpp`` with the best first-frame MPSNR (see the module docstring). ``preset``:
     the only preset to consider; ``None`` considers every preset (and the residual layer
     with :data:`RESIDUAL_PRESET`). ``hint_options``: the only hint options to consider;
     ``None`` tries the default and a 1/8-resolution hint. ``residual``: whether residual
     candidates are tried (they cost a decode and several AV1 sequence encodes per frame).
+    ``views_hint``: a candidate that codes the views themselves carries the depth hint too
+    (a stream fits its focal planes to it; the views do not need it).
 
     Shape:
         - frames: ``(T, U, V, H, W, 3)``
@@ -239,7 +274,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
             q, n, images = _best_quality(frames, packets, header, target_bytes, enc_p.coding)
             at_q, moved = _at_quality(header, packets, q, images, enc_p.coding)
             candidates.append({"preset": name, "quality": q, "depth_hint": hint,
-                               "hint_scale": opts.hint_scale if hint else None, "residual": None,
+                               "hint_scale": opts.hint_scale if hint else None, "residual": None, "residual_mode": None,
                                "bpp": bpp(n, frames.shape), "mpsnr_first_frame": measure(at_q, moved),
                                "_stream": (at_q, tuple(moved), opts)})
         if not (residual and hint and opts.hint_scale == HintOptions().hint_scale and frames.shape[1] * frames.shape[2] > 1):
@@ -256,8 +291,23 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
             r, at_q, moved = found
             n = len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved)
             candidates.append({"preset": res_preset, "quality": q, "depth_hint": True, "hint_scale": opts.hint_scale,
-                               "residual": r, "bpp": bpp(n, frames.shape), "mpsnr_first_frame": measure(at_q, moved),
+                               "residual": r, "residual_mode": "prediction", "bpp": bpp(n, frames.shape),
+                               "mpsnr_first_frame": measure(at_q, moved),
                                "_stream": (at_q, tuple(moved), opts)})
+
+    if residual and frames.shape[1] * frames.shape[2] > 1 and (present is None or np.all(present)):
+        # the views themselves (scenes warping cannot predict: toys_array); not where views
+        # are missing: a prediction reconstructs those, a coded sequence would not
+        for mode in VIEW_MODES:
+            found = _views_candidate(frames, present, res_preset, fps, target_bytes, views_hint, mode)
+            if found is None:
+                continue
+            q, at_q, moved = found
+            n = len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved)
+            candidates.append({"preset": res_preset, "quality": q, "depth_hint": views_hint,
+                               "hint_scale": HintOptions().hint_scale if views_hint else None,
+                               "residual": q, "residual_mode": mode, "bpp": bpp(n, frames.shape),
+                               "mpsnr_first_frame": measure(at_q, moved), "_stream": (at_q, tuple(moved), HintOptions())})
 
     # within the tolerance where possible, then the better measured quality
     def rank(c: dict) -> tuple:
@@ -268,7 +318,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     header_q, packets_q, opts_q = best["_stream"]
     report = tuple({k: v for k, v in c.items() if k != "_stream"} for c in candidates)
     return RateChoice(best["quality"], best["depth_hint"], best["bpp"], best["mpsnr_first_frame"], report, header_q,
-                      packets_q, best["preset"], opts_q, best["residual"])
+                      packets_q, best["preset"], opts_q, best["residual"], best["residual_mode"] or "prediction")
 
 
 __all__ = ["RATE_TOLERANCE", "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "FOLLOW_MAX_STEP",

@@ -11,16 +11,25 @@ range as :func:`lfstream.codec.intra.rgb_to_i420`). Measured on lytro_bikes at 0
 less: per-view noise is what a residual mostly holds, and only inter prediction across
 views codes it cheaply).
 
+Two modes (:data:`RESIDUAL_MODES`): ``prediction`` codes ``view - prediction``; ``views`` codes
+the views themselves (format 2: the "prediction" is mid-grey, so the decoder skips the warp).
+Where warping cannot predict a scene the residual of a poor prediction costs more than the
+views: on toys_array (7.5 px between neighbouring views, occlusions everywhere; the hint's
+warp reconstructs even the nearest views at 22-24 dB) rate control's best prediction-residual
+stream at 0.08 bpp decoded at 23.4 dB where the views coded as one sequence reach 28.0 dB at
+0.076 bpp. Rate control measures both and picks (:mod:`lfstream.codec.rate`).
+
 Payload (little-endian)::
 
-    format   u8   1
+    format   u8   1 (prediction), 2 (views) or 3 (half-views)
     codec    u8   2 = AV1 (the bitstream's codec ids)
     frames   u16  number of coded residual views (U * V - 1)
     then per AV1 packet: length u32, bytes
 
-The decoder adds the residual only to the prediction it was computed against: the hint's
-(or, without a hint, the flat) warp of the decoded centre view with the gains, JPEG-Hance
-off (:class:`lfstream.codec.decoder.Decoder` decides).
+The decoder adds a ``prediction`` residual only to the prediction it was computed against: the
+hint's (or, without a hint, the flat) warp of the decoded centre view with the gains, JPEG-Hance
+off (:class:`lfstream.codec.decoder.Decoder` decides); a ``views`` residual replaces the views
+whatever the decoder's settings.
 """
 
 from __future__ import annotations
@@ -35,7 +44,20 @@ from lfstream.codec.intra import CentreCoding, i420_to_rgb, pad_to_even, rgb_to_
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.errors import BitstreamError, LFValueError
 
-RESIDUAL_FORMAT = 1
+RESIDUAL_FORMAT = 1  # view - prediction
+VIEWS_FORMAT = 2  # the views themselves
+HALF_VIEWS_FORMAT = 3  # the views at half the size in each dimension
+#: What a residual layer codes: the prediction's error, the views themselves, or the views at
+#: half size (up-sampled bicubically at decode: the lowest rates of scenes no warp predicts;
+#: toys_array: 0.013-0.023 bpp at 21.0-22.9 dB, where full-size views cannot go under 0.026).
+RESIDUAL_MODES = ("prediction", "views", "half-views")
+_FORMAT_MODES = {RESIDUAL_FORMAT: "prediction", VIEWS_FORMAT: "views", HALF_VIEWS_FORMAT: "half-views"}
+
+
+def coded_size(size: tuple[int, int], mode: str) -> tuple[int, int]:
+    """The size a residual's views are coded at (before padding to even)."""
+    h, w = size
+    return ((h + 1) // 2, (w + 1) // 2) if mode == "half-views" else (h, w)
 _HEAD = struct.Struct("<BBH")
 _LEN = struct.Struct("<I")
 #: Residual values are stored with this offset (8-bit mid-grey is "no correction").
@@ -56,12 +78,32 @@ def check_residual_quality(quality: int) -> int:
     return int(quality)
 
 
-def encode_residual(lf: np.ndarray, prediction: np.ndarray, quality: int, speed: int = 8) -> bytes:
-    """Codes ``lf - prediction`` for every view but the centre as one AV1 sequence.
+def check_residual_mode(mode: str) -> str:
+    if mode not in RESIDUAL_MODES:
+        raise LFValueError(f"residual_mode: one of {', '.join(RESIDUAL_MODES)}, got {mode!r}")
+    return mode
+
+
+#: The modes that code the views themselves (the decoder does not warp).
+VIEW_MODES = ("views", "half-views")
+
+
+def residual_mode(data: bytes) -> str | None:
+    """The mode of a residual payload (``None``: empty or not a known format; the decode
+    names the damage)."""
+    return _FORMAT_MODES.get(data[0]) if data else None
+
+
+def encode_residual(lf: np.ndarray, prediction: np.ndarray | None, quality: int, speed: int = 8,
+                    half: bool = False) -> bytes:
+    """Codes ``lf - prediction`` (or, with ``prediction=None``, the views themselves: mode
+    ``views``; with ``half`` too, at half size: ``half-views``) for every view but the centre
+    as one AV1 sequence.
 
     Args:
         lf: the original frame, uint8.
-        prediction: what the decoder reconstructs without the residual, uint8.
+        prediction: what the decoder reconstructs without the residual, uint8; ``None``: a
+            ``views`` residual.
         quality: 1..100 (SVT-AV1 CRF 63..1, as the centre view's AV1 coding).
         speed: SVT-AV1 preset.
 
@@ -72,6 +114,20 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray, quality: int, speed:
 
     check_residual_quality(quality)
     CentreCoding("av1", speed)  # the same SVT-AV1 preset range as the centre view's
+    fmt = RESIDUAL_FORMAT
+    if half and prediction is not None:
+        raise LFValueError("residual: half size is a mode of the views, not of a prediction's error")
+    if prediction is None:  # the views: against mid-grey, they are coded as they are
+        fmt, prediction = VIEWS_FORMAT, np.broadcast_to(np.uint8(OFFSET), lf.shape)
+    if half:
+        import cv2
+
+        fmt = HALF_VIEWS_FORMAT
+        if lf.dtype == np.uint8 and lf.ndim == 5:
+            ch, cw = coded_size(lf.shape[2:4], "half-views")
+            lf = np.stack([np.stack([cv2.resize(view, (cw, ch), interpolation=cv2.INTER_AREA) for view in row])
+                           for row in lf])
+            prediction = np.broadcast_to(np.uint8(OFFSET), lf.shape)
     if lf.shape != prediction.shape or lf.dtype != np.uint8 or prediction.dtype != np.uint8:
         raise LFValueError(f"residual: lf {lf.shape} {lf.dtype} and prediction {prediction.shape} {prediction.dtype} "
                            "must be uint8 of one shape")
@@ -93,7 +149,7 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray, quality: int, speed:
         frame.pts = k
         collect(ctx.encode(frame))
     collect(ctx.encode(None))
-    return _HEAD.pack(RESIDUAL_FORMAT, CODEC_AV1, len(order)) + b"".join(chunks)
+    return _HEAD.pack(fmt, CODEC_AV1, len(order)) + b"".join(chunks)
 
 
 def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
@@ -110,17 +166,17 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
     """
     import av
 
-    h, w = size
     order = residual_views(views)
     if len(data) < _HEAD.size:
         raise BitstreamError(f"residual payload truncated ({len(data)} bytes)", frame)
     fmt, codec, count = _HEAD.unpack_from(data)
-    if fmt != RESIDUAL_FORMAT or codec != CODEC_AV1:
-        raise BitstreamError(f"residual payload format {fmt} / codec {codec} unknown (expected {RESIDUAL_FORMAT} / "
-                             f"{CODEC_AV1})", frame)
+    if fmt not in _FORMAT_MODES or codec != CODEC_AV1:
+        raise BitstreamError(f"residual payload format {fmt} / codec {codec} unknown (expected "
+                             f"{' or '.join(map(str, _FORMAT_MODES))} / {CODEC_AV1})", frame)
     if count != len(order):
         raise BitstreamError(f"residual payload covers {count} views, the stream has {len(order)} besides the centre",
                              frame)
+    h, w = coded_size(size, _FORMAT_MODES[fmt])
     packets = []
     pos = _HEAD.size
     while pos < len(data):
@@ -157,7 +213,8 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
 
 def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None) -> np.ndarray:
     """``lf`` (the prediction the residual was computed against) with the residual added,
-    in place (one fused pass: YCbCr to RGB, offset, saturation); returns ``lf``.
+    in place (one fused pass: YCbCr to RGB, offset, saturation); a ``views`` residual
+    replaces every view but the centre instead. Returns ``lf``.
 
     Shape:
         - lf: ``(U, V, H, W, 3)`` uint8
@@ -166,22 +223,37 @@ def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None) -> np.
 
     u, v, h, w, _ = lf.shape
     planes = decode_residual(data, (u, v), (h, w), frame)
-    add_i420_residual(lf, planes, np.array(residual_views((u, v)), np.int64), OFFSET)
+    positions = np.array(residual_views((u, v)), np.int64)
+    offset = OFFSET
+    if residual_mode(data) == "half-views":  # small views: converted, then up-sampled
+        import cv2
+
+        ch, cw = coded_size((h, w), "half-views")
+        for (a, b), p in zip(positions, planes):
+            cv2.resize(i420_to_rgb(p)[:ch, :cw], (w, h), dst=lf[a, b], interpolation=cv2.INTER_CUBIC)
+        return lf
+    if residual_mode(data) == "views":  # zero plus the views, offset 0: the views themselves
+        lf[positions[:, 0], positions[:, 1]] = 0
+        offset = 0
+    add_i420_residual(lf, planes, positions, offset)
     return lf
 
 
 def residual_images(data: bytes, views: tuple[int, int], size: tuple[int, int],
                     frame: int | None = None) -> list[np.ndarray]:
-    """The residual views as RGB images (offset by :data:`OFFSET`), in
+    """The residual views as RGB images (offset by :data:`OFFSET`; a ``views`` residual's
+    are the views, a ``half-views`` one's at :func:`coded_size`), in
     :func:`residual_views` order: the plain path the fused :func:`apply_residual` is
     tested against.
 
     Shape:
         - output: ``U * V - 1`` arrays ``(H, W, 3)`` uint8
     """
-    h, w = size
+    h, w = coded_size(size, residual_mode(data) or "prediction")
     return [i420_to_rgb(p)[:h, :w] for p in decode_residual(data, views, size, frame)]
 
 
-__all__ = ["RESIDUAL_FORMAT", "OFFSET", "residual_views", "check_residual_quality", "encode_residual",
-           "decode_residual", "apply_residual", "residual_images"]
+__all__ = ["RESIDUAL_FORMAT", "VIEWS_FORMAT", "HALF_VIEWS_FORMAT", "RESIDUAL_MODES", "VIEW_MODES",
+           "coded_size", "OFFSET", "check_residual_mode", "residual_mode",
+           "residual_views", "check_residual_quality", "encode_residual", "decode_residual", "apply_residual",
+           "residual_images"]

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
 from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS, Encoder
 from lfstream.codec.jpeg import QUALITY_RANGE
+from lfstream.codec.residual import RESIDUAL_MODES
 from lfstream.errors import LFValueError
 from lfstream.optics import PlenopticCamera
 
@@ -55,6 +56,8 @@ class StreamConfig:
     # quality of the residual layer (lfstream.codec.residual); None: none (with bpp, rate
     # control decides)
     residual: int | None = None
+    # what the residual layer codes (lfstream.codec.residual.RESIDUAL_MODES)
+    residual_mode: str = "prediction"
     depth: str = "auto"
     hance: str = "auto"
     refocus: str = "auto"
@@ -84,7 +87,7 @@ class StreamConfig:
     def encoder(self) -> Encoder:
         """The encoder these fields describe (before rate control, which picks its own)."""
         return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset or DEFAULT_PRESET,
-                       residual=self.residual)
+                       residual=self.residual, residual_mode=self.residual_mode)
 
     def validate(self) -> None:
         """Raises :class:`LFValueError` naming the first field out of its range."""
@@ -97,6 +100,9 @@ class StreamConfig:
             check_range("residual", self.residual, QUALITY_RANGE)
             if self.bpp is not None:
                 raise LFValueError("residual: rate control (bpp) chooses the residual layer itself; give one or the other")
+        check_choice("residual_mode", self.residual_mode, RESIDUAL_MODES)
+        if self.residual_mode != "prediction" and (self.residual is None or self.bpp is not None):
+            raise LFValueError(f"residual_mode {self.residual_mode!r}: needs a residual quality (and no bpp)")
         if isinstance(self.alphas, str):
             check_choice("alphas", self.alphas, FOCUS_MODES)
         else:

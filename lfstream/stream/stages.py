@@ -200,10 +200,12 @@ class EncoderStage(ConsumerStage):
             # rate control on the first frame: the quality and hint the whole stream uses
             from lfstream.codec.rate import choose_configuration
 
+            # views_hint: the focal planes are fitted to the decoded disparity
             choice = choose_configuration(lf[None], self.config.bpp, self.config.fps, self.present,
-                                          preset=self.config.preset)
+                                          preset=self.config.preset, views_hint=True)
             self.encoder = Encoder(quality=choice.quality, depth_hint=choice.depth_hint, preset=choice.preset,
-                                   hint_options=choice.hint_options, residual=choice.residual)
+                                   hint_options=choice.hint_options, residual=choice.residual,
+                                   residual_mode=choice.residual_mode)
         pixels = int(np.prod(lf.shape[:4]))
         if not self.started:
             self.channel.send_header(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
@@ -215,6 +217,8 @@ class EncoderStage(ConsumerStage):
             last = self.rate.frame_bpp[max(self.rate.frame_bpp)] * pixels
             self.encoder.quality = follow_rate(self.encoder.quality, self.config.bpp, 8.0 * self.rate.bytes,
                                                self.rate.pixels, last, pixels)
+            if self.encoder.residual_mode != "prediction":  # its bits are the views': one quality for all
+                self.encoder.residual = self.encoder.quality
         packet = self.encoder.encode_frame(lf, item.seq, int(round(item.seq * 1e6 / self.config.fps)), self.present)
         self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain) + len(packet.residual), pixels,
                       self.encoder.quality)
