@@ -44,6 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lfstream.codec.encoder import Encoder, encode_file, frames_of, write_stream_file
+    from lfstream.errors import LFValueError
     from lfstream.io._fs import check_new_file
     from lfstream.metrics import bpp
 
@@ -54,12 +55,8 @@ def run(args: argparse.Namespace) -> int:
     quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
     residual, residual_mode = args.residual, args.residual_mode
     if args.bpp is not None and (residual is not None or residual_mode != "prediction"):
-        from lfstream.errors import LFValueError
-
         raise LFValueError("--residual: rate control (--bpp) chooses the residual layer itself; give one or the other")
     if residual_mode != "prediction" and residual is None:
-        from lfstream.errors import LFValueError
-
         raise LFValueError("--residual-mode: needs --residual Q (the layer's quality)")
     if args.bpp is not None:
         from lfstream.codec.rate import choose_configuration

@@ -115,6 +115,11 @@ class Encoder:
                             codec=self.coding.codec_id, meta=meta, has_residual=self.residual is not None)
 
     @property
+    def codes_views(self) -> bool:
+        """Whether the residual layer carries the views themselves (no prediction, no gains)."""
+        return self.residual is not None and self.residual_mode != "prediction"
+
+    @property
     def stream_version(self) -> int:
         """The ``.lfs`` version of this encoder's streams."""
         return stream_version(self.coding.codec_id, self.residual is not None)
@@ -135,7 +140,7 @@ class Encoder:
         if lf.shape[-1] != 3:
             raise LFValueError(f"frame {seq}: expected 3 colour channels, got {lf.shape[-1]}")
         check_finite(lf, f"frame {seq}")
-        if self.residual is not None and self.residual_mode != "prediction" and present is not None and not present.all():
+        if self.codes_views and present is not None and not present.all():
             raise LFValueError(f"frame {seq}: residual_mode {self.residual_mode!r} codes every view and "
                                f"{int((~present).sum())} are missing; use the prediction mode, which reconstructs them")
         frame = to_uint8(np.asarray(lf))
@@ -144,8 +149,7 @@ class Encoder:
         if self.depth_hint:
             hint = self._hints.encode(frame, seq, present)
         gain = b""
-        views_residual = self.residual is not None and self.residual_mode != "prediction"
-        if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1 and not views_residual:
+        if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1 and not self.codes_views:
             gains = measure_gains(frame, self.gain_grid, present=present)
             gain = self._gains.encode(gains if shading_present(gains) else None, seq)
         packet = Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)

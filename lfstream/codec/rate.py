@@ -77,6 +77,11 @@ class RateChoice:
         return pack_header(self.header) + b"".join(pack_packet(p, self.header.version) for p in self.packets)
 
 
+def _stream_bytes(header: StreamHeader, packets) -> int:
+    """Bytes of the ``.lfs`` stream ``header`` and ``packets`` make."""
+    return len(pack_header(header)) + sum(p.size(header.version) for p in packets)
+
+
 def _at_quality(header: StreamHeader, packets: list[Packet], quality: int, images: list[bytes],
                 coding: CentreCoding) -> tuple[StreamHeader, list[Packet]]:
     """The stream at another quality: the header records it, each packet carries its centre
@@ -126,10 +131,20 @@ def _quality_bracket(size, target_bytes: float) -> tuple[int, int]:
     return lo, hi
 
 
+def _fitting_quality(size, target_bytes: float) -> int | None:
+    """Of the bracket around ``target_bytes`` (:func:`_quality_bracket`), the quality whose
+    ``size`` is nearest the target without passing it by more than :data:`RATE_TOLERANCE`;
+    ``None`` when even the lowest quality does not fit."""
+    if size(QUALITY_RANGE[0]) > target_bytes * (1 + RATE_TOLERANCE):
+        return None
+    fits = [q for q in _quality_bracket(size, target_bytes) if size(q) <= target_bytes * (1 + RATE_TOLERANCE)]
+    return min(fits, key=lambda k: abs(size(k) - target_bytes))
+
+
 def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeader, target_bytes: float,
-                  coding: CentreCoding) -> tuple[int, int, list[bytes]]:
-    """The quality whose stream is closest to ``target_bytes`` (bisection; sizes grow with
-    quality), that stream's size and its centre-view payloads."""
+                  coding: CentreCoding) -> tuple[int, list[bytes]]:
+    """The quality whose stream is closest to ``target_bytes`` (:func:`_quality_bracket`;
+    sizes grow with quality) and that stream's centre-view payloads."""
     centres = [centre_view(to_uint8(f)) for f in frames]
     cache: dict[int, tuple[int, list[bytes]]] = {}
 
@@ -137,11 +152,11 @@ def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeade
         if q not in cache:
             images = [encode_centre(c, q, coding) for c in centres]
             at_q, moved = _at_quality(header, packets, q, images, coding)
-            cache[q] = (len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved), images)
+            cache[q] = (_stream_bytes(at_q, moved), images)
         return cache[q][0]
 
     q = min(_quality_bracket(size, target_bytes), key=lambda k: abs(size(k) - target_bytes))
-    return q, size(q), cache[q][1]
+    return q, cache[q][1]
 
 
 def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: StreamHeader, quality: int,
@@ -159,7 +174,7 @@ def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: Strea
     u, v, h, w = frames.shape[1:5]
     predictions = [ref.predict(p, (u, v), (h, w)) for p in moved]  # in stream order: delta hints
     frames8 = [to_uint8(f) for f in frames]
-    base = len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved)
+    base = _stream_bytes(at_q, moved)
     cache: dict[int, tuple[int, list[bytes]]] = {}
 
     def size(r: int) -> int:
@@ -168,10 +183,9 @@ def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: Strea
             cache[r] = (base + sum(len(x) for x in payloads), payloads)
         return cache[r][0]
 
-    if size(QUALITY_RANGE[0]) > target_bytes * (1 + RATE_TOLERANCE):
+    r = _fitting_quality(size, target_bytes)
+    if r is None:
         return None
-    fits = [r for r in _quality_bracket(size, target_bytes) if size(r) <= target_bytes * (1 + RATE_TOLERANCE)]
-    r = min(fits, key=lambda k: abs(size(k) - target_bytes))
     meta = {**at_q.meta, "residual": residual_meta(r, RESIDUAL_SPEED[preset])}
     with_res = replace(at_q, meta=meta)
     return r, with_res, [replace(p, residual=x) for p, x in zip(moved, cache[r][1])]
@@ -179,8 +193,8 @@ def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: Strea
 
 def _views_candidate(frames: np.ndarray, present: np.ndarray | None, preset: str, fps: float,
                      target_bytes: float, hint: bool, mode: str = "views") -> tuple[int, StreamHeader, list[Packet]] | None:
-    """The stream whose residual codes the views themselves (mode ``views``, no gains; the
-    hint only with ``hint``: it does not shape the views, and costs toys_array 0.003 bpp)
+    """The stream whose residual codes the views themselves (``mode``: ``views`` or
+    ``half-views``; no gains; the hint only with ``hint``: it does not shape the views, and costs toys_array 0.003 bpp)
     closest to the target without passing it by more than :data:`RATE_TOLERANCE`:
     the centre view and the views' sequence at one quality (the centre is one view among
     U * V: a better centre would buy 1/(U * V) of the MPSNR), searched like the centre's.
@@ -194,14 +208,11 @@ def _views_candidate(frames: np.ndarray, present: np.ndarray | None, preset: str
             enc = Encoder(quality=q, depth_hint=hint, preset=preset, residual=q, residual_mode=mode)
             header = enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
             packets = [enc.encode_frame(f, t, int(round(t * 1e6 / fps)), present) for t, f in enumerate(frames)]
-            cache[q] = (len(pack_header(header)) + sum(p.size(header.version) for p in packets), header, packets)
+            cache[q] = (_stream_bytes(header, packets), header, packets)
         return cache[q][0]
 
-    if size(QUALITY_RANGE[0]) > target_bytes * (1 + RATE_TOLERANCE):
-        return None
-    fits = [q for q in _quality_bracket(size, target_bytes) if size(q) <= target_bytes * (1 + RATE_TOLERANCE)]
-    q = min(fits, key=lambda k: abs(size(k) - target_bytes))
-    return q, cache[q][1], cache[q][2]
+    q = _fitting_quality(size, target_bytes)
+    return None if q is None else (q, cache[q][1], cache[q][2])
 
 
 def follow_rate(quality: int, target_bpp: float, spent_bits: float, done_pixels: int, last_bits: float,
@@ -261,6 +272,12 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         first = pack_header(at_q) + pack_packet(moved[0], at_q.version)  # the first frame is a key frame
         return float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
 
+    def add(name: str, q: int, hint_scale: int | None, r: int | None, mode: str | None, at_q: StreamHeader,
+            moved: list[Packet], opts: HintOptions) -> None:
+        candidates.append({"preset": name, "quality": q, "depth_hint": at_q.has_hint, "hint_scale": hint_scale,
+                           "residual": r, "residual_mode": mode, "bpp": bpp(_stream_bytes(at_q, moved), frames.shape),
+                           "mpsnr_first_frame": measure(at_q, moved), "_stream": (at_q, tuple(moved), opts)})
+
     hints = [hint_options] if hint_options is not None else [HintOptions(), HintOptions(hint_scale=COARSE_HINT_SCALE)]
     res_preset = RESIDUAL_PRESET if preset is None else preset
     for hint, opts in [(True, h) for h in hints] + [(False, HintOptions())]:
@@ -271,43 +288,30 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         for name in presets:
             enc_p = Encoder(quality=50, depth_hint=hint, hint_options=opts, gain_grid=gain_grid, preset=name)
             header = enc_p.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
-            q, n, images = _best_quality(frames, packets, header, target_bytes, enc_p.coding)
+            q, images = _best_quality(frames, packets, header, target_bytes, enc_p.coding)
             at_q, moved = _at_quality(header, packets, q, images, enc_p.coding)
-            candidates.append({"preset": name, "quality": q, "depth_hint": hint,
-                               "hint_scale": opts.hint_scale if hint else None, "residual": None, "residual_mode": None,
-                               "bpp": bpp(n, frames.shape), "mpsnr_first_frame": measure(at_q, moved),
-                               "_stream": (at_q, tuple(moved), opts)})
+            add(name, q, opts.hint_scale if hint else None, None, None, at_q, moved, opts)
         if not (residual and hint and opts.hint_scale == HintOptions().hint_scale and frames.shape[1] * frames.shape[2] > 1):
             continue
         enc_r = Encoder(quality=50, depth_hint=True, hint_options=opts, gain_grid=gain_grid, preset=res_preset,
                         residual=1)
         header_r = enc_r.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
         for share in RESIDUAL_SHARES:
-            q, n, images = _best_quality(frames, packets, header_r, share * target_bytes, enc_r.coding)
+            q, images = _best_quality(frames, packets, header_r, share * target_bytes, enc_r.coding)
             found = _residual_candidate(frames, packets, header_r, q, images, enc_r.coding, res_preset, opts,
                                         gain_grid, target_bytes)
-            if found is None:
-                continue
-            r, at_q, moved = found
-            n = len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved)
-            candidates.append({"preset": res_preset, "quality": q, "depth_hint": True, "hint_scale": opts.hint_scale,
-                               "residual": r, "residual_mode": "prediction", "bpp": bpp(n, frames.shape),
-                               "mpsnr_first_frame": measure(at_q, moved),
-                               "_stream": (at_q, tuple(moved), opts)})
+            if found is not None:
+                r, at_q, moved = found
+                add(res_preset, q, opts.hint_scale, r, "prediction", at_q, moved, opts)
 
     if residual and frames.shape[1] * frames.shape[2] > 1 and (present is None or np.all(present)):
         # the views themselves (scenes warping cannot predict: toys_array); not where views
         # are missing: a prediction reconstructs those, a coded sequence would not
         for mode in VIEW_MODES:
             found = _views_candidate(frames, present, res_preset, fps, target_bytes, views_hint, mode)
-            if found is None:
-                continue
-            q, at_q, moved = found
-            n = len(pack_header(at_q)) + sum(p.size(at_q.version) for p in moved)
-            candidates.append({"preset": res_preset, "quality": q, "depth_hint": views_hint,
-                               "hint_scale": HintOptions().hint_scale if views_hint else None,
-                               "residual": q, "residual_mode": mode, "bpp": bpp(n, frames.shape),
-                               "mpsnr_first_frame": measure(at_q, moved), "_stream": (at_q, tuple(moved), HintOptions())})
+            if found is not None:
+                q, at_q, moved = found
+                add(res_preset, q, HintOptions().hint_scale if views_hint else None, q, mode, at_q, moved, HintOptions())
 
     # within the tolerance where possible, then the better measured quality
     def rank(c: dict) -> tuple:

@@ -217,7 +217,7 @@ class EncoderStage(ConsumerStage):
             last = self.rate.frame_bpp[max(self.rate.frame_bpp)] * pixels
             self.encoder.quality = follow_rate(self.encoder.quality, self.config.bpp, 8.0 * self.rate.bytes,
                                                self.rate.pixels, last, pixels)
-            if self.encoder.residual_mode != "prediction":  # its bits are the views': one quality for all
+            if self.encoder.codes_views:  # its bits are the views': one quality for all
                 self.encoder.residual = self.encoder.quality
         packet = self.encoder.encode_frame(lf, item.seq, int(round(item.seq * 1e6 / self.config.fps)), self.present)
         self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain) + len(packet.residual), pixels,
