@@ -30,7 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "error coded as one AV1 sequence "
                    "(more bits, quality that keeps rising with rate; default: none, --bpp decides itself)")
     p.add_argument("--residual-mode", choices=RESIDUAL_MODES, default="prediction",
-                   help="what the residual layer codes: prediction (the default) or views (the views themselves)")
+                   help="what the residual layer codes: prediction (the default), views (the views themselves) "
+                   "or half-views (the views at half size)")
     p.add_argument("--frames", type=int_in((1, 1 << 20)), default=12, help="frames of the built-in clip")
     _pipeline.add_pipeline_options(p)
     add_read_options(p)
