@@ -44,6 +44,11 @@ class BitstreamError(LFValueError):
         self.frame = frame
 
 
+class EncoderStalledError(LFStreamError):
+    """A third-party encoder (SVT-AV1, x265) did not return within its deadline on every
+    attempt (:mod:`lfstream.codec.watchdog`)."""
+
+
 class WeightsError(LFFileError):
     """A shipped network weights file is missing or does not match its SHA-256."""
 
@@ -57,4 +62,5 @@ __all__ = [
     "LFMissingViewsError",
     "BitstreamError",
     "WeightsError",
+    "EncoderStalledError",
 ]

@@ -24,6 +24,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from lfstream.codec.watchdog import call_with_deadline, encoder_deadline
 from lfstream.errors import LFValueError
 from lfstream.io.video import rgb_to_video_i420
 from lfstream.lightfield import check_lf, to_uint8
@@ -110,18 +111,22 @@ def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order
         # measured: x265 (PyAV 18.1 wheel) corrupts its heap in CRF mode on 40x48 frames
         raise LFValueError(f"x265 CRF mode needs views of at least {MIN_CRF_SIDE}x{MIN_CRF_SIDE}; "
                            "use constant QP for smaller views")
-    buf = io.BytesIO()
-    with av.open(buf, mode="w", format=spec.container) as container:
-        stream = container.add_stream(spec.encoder, rate=Fraction(25, 1),
-                                      options=spec.options(quality, u * v, constant_qp, preset))
-        stream.width, stream.height, stream.pix_fmt = pw, ph, "yuv420p"
-        for a, b in view_order(u, v, order):
-            frame = av.VideoFrame.from_ndarray(rgb_to_video_i420(frame_lf[a, b], (ph, pw)), format="yuv420p")
-            for packet in stream.encode(frame):
+
+    def run() -> bytes:  # self-contained, so the watchdog can retry it on a fresh encoder
+        buf = io.BytesIO()
+        with av.open(buf, mode="w", format=spec.container) as container:
+            stream = container.add_stream(spec.encoder, rate=Fraction(25, 1),
+                                          options=spec.options(quality, u * v, constant_qp, preset))
+            stream.width, stream.height, stream.pix_fmt = pw, ph, "yuv420p"
+            for a, b in view_order(u, v, order):
+                frame = av.VideoFrame.from_ndarray(rgb_to_video_i420(frame_lf[a, b], (ph, pw)), format="yuv420p")
+                for packet in stream.encode(frame):
+                    container.mux(packet)
+            for packet in stream.encode():
                 container.mux(packet)
-        for packet in stream.encode():
-            container.mux(packet)
-    return buf.getvalue()
+        return buf.getvalue()
+
+    return call_with_deadline(run, encoder_deadline(u * v * ph * pw), f"{codec} pseudo-sequence")
 
 
 def decode_views(data: bytes, codec: str, views: tuple[int, int], size: tuple[int, int], order: str = "raster") -> np.ndarray:

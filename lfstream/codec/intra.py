@@ -22,6 +22,7 @@ import numpy as np
 
 from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, CODEC_NAMES
 from lfstream.codec.jpeg import QUALITY_RANGE, decode_jpeg, encode_jpeg
+from lfstream.codec.watchdog import call_with_deadline, encoder_deadline
 from lfstream.errors import BitstreamError, LFValueError
 
 CODEC_IDS = {name: cid for cid, name in CODEC_NAMES.items()}
@@ -133,10 +134,15 @@ def encode_av1(img: np.ndarray, quality: int, speed: int = 12) -> bytes:
     import av
 
     img = pad_to_even(img)
-    ctx = svtav1_encoder(img.shape[:2], quality, speed)
-    frame = av.VideoFrame.from_ndarray(rgb_to_i420(img), format="yuv420p")
-    frame.pts = 0
-    data = b"".join(bytes(p) for p in ctx.encode(frame)) + b"".join(bytes(p) for p in ctx.encode(None))
+    i420 = rgb_to_i420(img)
+
+    def run() -> bytes:
+        ctx = svtav1_encoder(img.shape[:2], quality, speed)
+        frame = av.VideoFrame.from_ndarray(i420, format="yuv420p")
+        frame.pts = 0
+        return b"".join(bytes(p) for p in ctx.encode(frame)) + b"".join(bytes(p) for p in ctx.encode(None))
+
+    data = call_with_deadline(run, encoder_deadline(img.shape[0] * img.shape[1]), "AV1 centre view")
     if not data:  # pragma: no cover - the encoder always emits a key frame for one input frame
         raise LFValueError("AV1 encoding produced no data")
     return data

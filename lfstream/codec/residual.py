@@ -42,6 +42,7 @@ from lfstream.codec.baseline import view_order
 from lfstream.codec.bitstream import CODEC_AV1
 from lfstream.codec.intra import CentreCoding, i420_to_rgb, pad_to_even, rgb_to_i420, svtav1_encoder
 from lfstream.codec.jpeg import QUALITY_RANGE
+from lfstream.codec.watchdog import call_with_deadline, encoder_deadline
 from lfstream.errors import BitstreamError, LFValueError
 
 RESIDUAL_FORMAT = 1  # view - prediction
@@ -135,20 +136,26 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray | None, quality: int,
     order = residual_views((u, v))
     if not order:
         raise LFValueError("residual: a single-view light field has nothing to correct")
-    ctx = svtav1_encoder((h + h % 2, w + w % 2), quality, speed, gop=len(order))
-    chunks: list[bytes] = []
 
-    def collect(packets) -> None:
-        for p in packets:
-            data = bytes(p)
-            chunks.append(_LEN.pack(len(data)) + data)
+    def run() -> list[bytes]:
+        # self-contained (its own encoder, frames made on the way) so the watchdog can retry it
+        ctx = svtav1_encoder((h + h % 2, w + w % 2), quality, speed, gop=len(order))
+        chunks: list[bytes] = []
 
-    for k, (a, b) in enumerate(order):
-        res = np.clip(lf[a, b].astype(np.int16) - prediction[a, b] + OFFSET, 0, 255).astype(np.uint8)
-        frame = av.VideoFrame.from_ndarray(rgb_to_i420(pad_to_even(res)), format="yuv420p")
-        frame.pts = k
-        collect(ctx.encode(frame))
-    collect(ctx.encode(None))
+        def collect(packets) -> None:
+            for p in packets:
+                data = bytes(p)
+                chunks.append(_LEN.pack(len(data)) + data)
+
+        for k, (a, b) in enumerate(order):
+            res = np.clip(lf[a, b].astype(np.int16) - prediction[a, b] + OFFSET, 0, 255).astype(np.uint8)
+            frame = av.VideoFrame.from_ndarray(rgb_to_i420(pad_to_even(res)), format="yuv420p")
+            frame.pts = k
+            collect(ctx.encode(frame))
+        collect(ctx.encode(None))
+        return chunks
+
+    chunks = call_with_deadline(run, encoder_deadline(len(order) * h * w), "AV1 residual sequence")
     return _HEAD.pack(fmt, CODEC_AV1, len(order)) + b"".join(chunks)
 
 
