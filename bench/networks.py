@@ -20,6 +20,7 @@ import torch
 from _harness import ROOT, emit, parser, timeit
 
 import lfstream
+from lfstream.codec import decode
 from lfstream.codec.hint import HintOptions, decode_hint, encode_hint, estimate_disparity
 from lfstream.codec.jpeg import deblock_jpeg, decode_jpeg, encode_jpeg, jpeg_quality_scale
 from lfstream.codec.jpeg import jpeg_roundtrip as jpeg
@@ -35,15 +36,24 @@ from lfstream.synth import synth_clip
 SHARED = ROOT.parent / "shared" / "data"
 
 
-def real_lfs() -> list[tuple[str, np.ndarray, np.ndarray | None]]:
+REAL = {"seahorse": "seahorse5x5/camImagesFlat", "dino": "hci_star/dino", "cotton": "hci_star/cotton",
+        "lytro_bikes": "lytro_bikes", "lytro_translucent": "lytro_translucent", "toys_array": "toys_array"}
+
+
+def real_lfs(names: tuple[str, ...] = ("seahorse", "dino", "cotton")) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
     out = []
-    if (SHARED / "seahorse5x5").exists():
-        out.append(("seahorse5x5", lfstream.read_lf(SHARED / "seahorse5x5" / "camImagesFlat"), None))
-    for scene in ("dino", "cotton"):
-        if (SHARED / "hci_star" / scene).exists():
-            lf, mask = lfstream.read_lf(SHARED / "hci_star" / scene, return_mask=True)
-            out.append((f"hci {scene}", lf, mask))
+    for name in names:
+        if (SHARED / REAL[name]).exists():
+            lf, mask = lfstream.read_lf(SHARED / REAL[name], return_mask=True)
+            out.append((name, lf, None if mask.all() else mask))
     return out
+
+
+def trained_on(name: str, preset: str) -> tuple[str, ...]:
+    """The real scenes a shipped network was trained on (its manifest recipe): it is judged
+    only on the others."""
+    entry = manifest_entry(name, preset) or {}
+    return tuple(entry.get("recipe", {}).get("scenes", ()))
 
 
 def synthetic_lfs(count: int, size: tuple[int, int], seed: int = 5000) -> list[tuple[str, np.ndarray, np.ndarray]]:
@@ -57,19 +67,22 @@ def synthetic_lfs(count: int, size: tuple[int, int], seed: int = 5000) -> list[t
 def bench_hance(device: str, runs: int, quick: bool) -> list[dict]:
     rows = []
     views = [(n, lf[lf.shape[0] // 2, lf.shape[1] // 2]) for n, lf, _ in synthetic_lfs(2 if quick else 6, (128, 128))]
-    views += [(n, lf[lf.shape[0] // 2, lf.shape[1] // 2]) for n, lf, _ in real_lfs()]
+    views += [(n, lf[lf.shape[0] // 2, lf.shape[1] // 2]) for n, lf, _ in real_lfs(tuple(REAL))]
     for preset in ("fast", "paper"):
         if manifest_entry("jpeg_hance", preset) is None:
             continue
         model = load_model("jpeg_hance", preset, device)
-        for q in (10, 30, 50, 70, 90) if not quick else (50,):
+        seen = trained_on("jpeg_hance", preset)
+        for q in (10, 30, 50, 60, 70, 90) if not quick else (50,):
             for name, view in views:
                 data = encode_jpeg(view, q)
                 dec = decode_jpeg(data, view.shape[:2])
-                rest = restore_images(dec[None], model, device)[0]
                 # the non-learned alternative the decoder runs by default
                 filt = deblock_jpeg(dec, jpeg_quality_scale(data) or 0.0)
+                # a network trained after the post-filter restores the filtered view
+                rest = restore_images((filt if model.config.after_deblock else dec)[None], model, device)[0]
                 rows.append({"model": "jpeg_hance", "preset": preset, "lf": name, "quality": q,
+                             "held_out": name not in seen,
                              "jpeg_psnr": capped(psnr(view, dec)), "hance_psnr": capped(psnr(view, rest)),
                              "deblock_psnr": capped(psnr(view, filt)),
                              "jpeg_ssim": float(ssim(view, dec)), "hance_ssim": float(ssim(view, rest)),
@@ -78,13 +91,39 @@ def bench_hance(device: str, runs: int, quick: bool) -> list[dict]:
         img = (np.random.default_rng(0).random((375, 540, 3)) * 255).astype(np.uint8) if img.std() == 0 else img
         t = timeit(lambda: restore_images(img[None], model, device), runs=runs)
         rows.append({"model": "jpeg_hance", "preset": preset, "timing": "375x540", "device": device, **t})
+    rows += hance_lf_rows(device, quick)
     for r in rows:
         if "quality" in r and r["quality"] == 50:
-            print(f"JPEG-Hance {r['preset']:5s} {r['lf']:18s} q50: {r['jpeg_psnr']:6.2f} -> {r['hance_psnr']:6.2f} dB "
+            label = r["lf"] + ("" if r["held_out"] else " (train)")
+            print(f"JPEG-Hance {r['preset']:5s} {label:26s} q50: {r['jpeg_psnr']:6.2f} -> {r['hance_psnr']:6.2f} dB "
                   f"(post-filter {r['deblock_psnr']:6.2f}), SSIM {r['jpeg_ssim']:.4f} -> {r['hance_ssim']:.4f} "
                   f"(post-filter {r['deblock_ssim']:.4f})")
         elif "timing" in r:
             print(f"JPEG-Hance {r['preset']:5s} 375x540 on {device}: {r['median_s'] * 1e3:.1f} ms")
+    return rows
+
+
+def hance_lf_rows(device: str, quick: bool) -> list[dict]:
+    """What the issue judges: the default encode of each real LF decoded with JPEG-Hance fast
+    (``hance="on"``) against without it (``"off"``: the post-filter), MPSNR and MSSIM over
+    the views present, on the scenes the shipped network was not trained on."""
+    rows = []
+    if manifest_entry("jpeg_hance", "fast") is None:
+        return rows
+    seen = trained_on("jpeg_hance", "fast")
+    for name, lf, mask in real_lfs(tuple(REAL)[:1] if quick else tuple(REAL)):
+        data = lfstream.encode(lf, present=mask) if mask is not None else lfstream.encode(lf)
+        ref = lf if mask is None else lf[mask][:, None]
+        row = {"model": "jpeg_hance", "preset": "fast", "lf": name, "held_out": name not in seen,
+               "decoded_lf": "default encode"}
+        for mode in ("off", "on"):
+            rec = decode(data, hance=mode, device=device)[0]
+            rec = rec if mask is None else rec[mask][:, None]
+            row[f"{mode}_mpsnr"], row[f"{mode}_mssim"] = capped(mpsnr(ref, rec)), float(mssim(ref, rec))
+        rows.append(row)
+        print(f"JPEG-Hance fast LF {name + ('' if row['held_out'] else ' (train)'):26s} default encode: "
+              f"MPSNR {row['off_mpsnr']:.2f} -> {row['on_mpsnr']:.2f} dB ({row['on_mpsnr'] - row['off_mpsnr']:+.2f}), "
+              f"MSSIM {row['off_mssim']:.4f} -> {row['on_mssim']:.4f}")
     return rows
 
 

@@ -1,5 +1,6 @@
 """Encoder/decoder: reconstruction quality, depth hint accuracy, warp, CLI."""
 
+import io
 import json
 
 import numpy as np
@@ -195,6 +196,30 @@ def test_encode_star_light_field_with_missing_views():
     no_centre[4, 4] = False
     with pytest.raises(LFValueError, match="centre view is missing"):
         lfstream.encode(lf, present=no_centre)
+
+
+def test_hance_auto_on_cpu_leaves_the_fast_network_off_and_on_filters_first(monkeypatch):
+    """``hance="auto"`` runs JPEG-Hance fast only on a GPU (on CPU it costs more than the
+    rest of the decode); ``"on"`` feeds it the post-filtered centre view it was trained on."""
+    from lfstream.codec import Decoder
+    from lfstream.codec.bitstream import iter_packets, read_header
+
+    clip = synth_clip(1, 3, (64, 80), seed=4, motion=0)
+    data = lfstream.encode(clip.lf, depth_hint=False)
+    header = read_header(io.BytesIO(data))
+    assert header.quality <= 60 and not Decoder(header, hance="auto").uses_hance
+    fh = io.BytesIO(data)
+    read_header(fh)
+    packet = next(iter_packets(fh, header))
+    seen = []
+    import lfstream.models.jpeg_hance as jh
+
+    real = jh.restore_images
+    monkeypatch.setattr(jh, "restore_images", lambda images, model, device="cpu": seen.append(images.copy())
+                        or real(images, model, device))
+    Decoder(header, hance="on", deblock=False).decode_centres([packet])
+    filtered = Decoder(header, hance="off").decode_centres([packet])
+    assert (seen[0] == filtered).all()
 
 
 def test_decode_with_networks_and_switches(tmp_path):

@@ -193,13 +193,26 @@ def test_shipped_depth_net_beats_flat_on_a_real_light_field():
     assert net > flat + 1.0, (net, flat)  # measured on the full view: 32.9 vs 29.1 dB
 
 
-def test_shipped_hance_improves_low_quality_jpeg():
+@pytest.mark.parametrize("folder", [("seahorse5x5", "camImagesFlat"), ("hci_star", "cotton")])
+def test_shipped_hance_beats_the_post_filter_on_held_out_scenes(folder):
+    """JPEG-Hance fast restores the post-filtered JPEG (what the decoder feeds it) better
+    than the post-filter alone, at the default quality, on scenes it was not trained on."""
     import lfstream
+    from lfstream.codec.jpeg import deblock_jpeg, decode_jpeg, encode_jpeg, jpeg_quality_scale
+    from lfstream.metrics import ssim
+    from lfstream.models.registry import manifest_entry
 
-    view = lfstream.read_lf(shared("seahorse5x5", "camImagesFlat"))[2, 2, 100:356, 100:356]
-    dec = jpeg_roundtrip(view, 10)
-    out = restore_images(dec[None], load_model("jpeg_hance"))[0]
-    assert psnr(view, out) > psnr(view, dec) + 0.1  # measured +0.43 dB on the full view at q10
+    model = load_model("jpeg_hance")
+    assert model.config.after_deblock
+    assert folder[-1] not in manifest_entry("jpeg_hance", "fast")["recipe"]["scenes"]
+    lf, mask = lfstream.read_lf(shared(*folder), return_mask=True)
+    view = lf[lf.shape[0] // 2, lf.shape[1] // 2, 64:320, 64:384]  # seahorse: mostly black
+    data = encode_jpeg(view, 50)
+    filt = deblock_jpeg(decode_jpeg(data, view.shape[:2]), jpeg_quality_scale(data))
+    out = restore_images(filt[None], model)[0]
+    # measured on the full centre views: seahorse +0.57 dB, cotton +0.27 (SSIM not lower)
+    assert psnr(view, out) > psnr(view, filt) + 0.1
+    assert ssim(view, out) > ssim(view, filt) - 1e-3
 
 
 def test_shipped_refnet_close_to_sas():
