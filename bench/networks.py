@@ -112,7 +112,7 @@ def hance_lf_rows(device: str, quick: bool) -> list[dict]:
         return rows
     seen = trained_on("jpeg_hance", "fast")
     for name, lf, mask in real_lfs(tuple(REAL)[:1] if quick else tuple(REAL)):
-        data = lfstream.encode(lf, present=mask) if mask is not None else lfstream.encode(lf)
+        data = lfstream.encode(lf, present=mask)
         ref = lf if mask is None else lf[mask][:, None]
         row = {"model": "jpeg_hance", "preset": "fast", "lf": name, "held_out": name not in seen,
                "decoded_lf": "default encode"}

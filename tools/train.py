@@ -127,14 +127,6 @@ def real_views(scenes: tuple[str, ...]) -> list[np.ndarray]:
     return out
 
 
-def deblocked_jpeg(img: np.ndarray, quality: int) -> np.ndarray:
-    """What a post-filter JPEG-Hance sees: the decoder's JPEG decode and post-filter."""
-    from lfstream.codec.jpeg import deblock_jpeg, decode_jpeg, encode_jpeg, jpeg_quality_scale
-
-    data = encode_jpeg(img, quality)
-    return deblock_jpeg(decode_jpeg(data, img.shape[:2]), jpeg_quality_scale(data) or 0.0)
-
-
 def real_hance_batch(views: list[np.ndarray], recipe: Recipe, rng: np.random.Generator
                      ) -> tuple[np.ndarray, np.ndarray]:
     """Crops of real views on the 8x8 JPEG grid, (input, target) uint8 ``(B, c, c, 3)``.
@@ -158,7 +150,7 @@ def real_hance_batch(views: list[np.ndarray], recipe: Recipe, rng: np.random.Gen
         if rng.random() < 0.5:
             crop = crop[:, ::-1]
         crop = np.ascontiguousarray(np.clip(crop + 0.5, 0, 255).astype(np.uint8))
-        xs.append(deblocked_jpeg(crop, int(rng.choice(recipe.qualities))))
+        xs.append(jpeg_roundtrip(crop, int(rng.choice(recipe.qualities)), deblock=True))
         ys.append(crop)
     return np.stack(xs), np.stack(ys)
 
@@ -218,18 +210,22 @@ def validate_hance(model, val_views: np.ndarray, quality: int, device) -> dict:
     model.eval()
     res = {}
     sets = [("synthetic", list(val_views))] + [(n, [v]) for n, v in real_centre_views()]
-    degrade = deblocked_jpeg if model.config.after_deblock else jpeg_roundtrip
     for name, views in sets:
-        gain_p = []
-        for view in views:
-            h, w = (view.shape[0] // 8) * 8, (view.shape[1] // 8) * 8
-            view = np.ascontiguousarray(view[:h, :w])
-            dec = _to_tensor(degrade(view, quality), device)[None]
-            ref = _to_tensor(view, device)[None]
-            gain_p.append(_psnr(model(dec), ref) - _psnr(dec, ref))
+        gain_p = [_hance_gain(model, view, quality, device) for view in views]
         res[f"{name}_psnr_gain_db"] = round(float(np.mean(gain_p)), 3)
     model.train()
     return res
+
+
+@torch.no_grad()
+def _hance_gain(model, view: np.ndarray, quality: int, device) -> float:
+    """PSNR gain (dB) of ``model`` (in eval mode) over its input on one view at ``quality``:
+    the plain JPEG, or the post-filtered one for a network trained after the filter."""
+    h, w = (view.shape[0] // 8) * 8, (view.shape[1] // 8) * 8
+    view = np.ascontiguousarray(view[:h, :w])
+    dec = _to_tensor(jpeg_roundtrip(view, quality, deblock=model.config.after_deblock), device)[None]
+    ref = _to_tensor(view, device)[None]
+    return _psnr(model(dec), ref) - _psnr(dec, ref)
 
 
 @torch.no_grad()
@@ -336,12 +332,8 @@ def train(recipe: Recipe, out: Path, device: str, resume: bool, workers: int, ch
         val_labels = np.stack([focal_stack(lf) for lf in val])
     n, u, v, h, w, _ = data.shape
     c = recipe.crop
-    t0 = time.perf_counter()
-    while run.step < recipe.steps:
-        if recipe.time_limit_s and time.perf_counter() - t0 > recipe.time_limit_s:
-            print(f"{run.tag}: time limit reached at step {run.step}", flush=True)
-            run.save()
-            break
+
+    def batch_loss() -> tuple[torch.Tensor, dict]:
         idx = rng.integers(0, n, recipe.batch)
         if recipe.model == "jpeg_hance":
             # one random view per item, crop on the 8x8 JPEG grid, JPEG round trip
@@ -349,9 +341,8 @@ def train(recipe: Recipe, out: Path, device: str, resume: bool, workers: int, ch
             ys, xs = rng.integers(0, (h - c) // 8 + 1, recipe.batch) * 8, rng.integers(0, (w - c) // 8 + 1, recipe.batch) * 8
             crops = augment(np.stack([im[y:y + c, x:x + c] for im, y, x in zip(imgs, ys, xs)]), rng)
             dec = np.stack([jpeg_roundtrip(cr, recipe.quality) for cr in crops])
-            loss = hance_loss(model(_to_tensor(dec, device)), _to_tensor(crops, device))
-            terms = {}
-        elif recipe.model == "depth_net":
+            return hance_loss(model(_to_tensor(dec, device)), _to_tensor(crops, device)), {}
+        if recipe.model == "depth_net":
             ys, xs = rng.integers(0, (h - c) // 8 + 1, recipe.batch) * 8, rng.integers(0, (w - c) // 8 + 1, recipe.batch) * 8
             lfs = augment(np.stack([data[i, :, :, y:y + c, x:x + c] for i, y, x in zip(idx, ys, xs)]), rng)
             centres = np.stack([jpeg_roundtrip(np.ascontiguousarray(lf[u // 2, v // 2]), recipe.quality) for lf in lfs])
@@ -363,11 +354,33 @@ def train(recipe: Recipe, out: Path, device: str, resume: bool, workers: int, ch
             if model.config.hint:
                 hint = torch.from_numpy(np.stack([hints[i, y:y + c, x:x + c] for i, y, x in zip(idx, ys, xs)]))
                 hint = hint[:, None].to(device)
-            loss, terms = depth_net_loss(centre, _to_tensor(lfs, device), model(centre, hint))
-        else:
-            lfs = _to_tensor(data[idx], device)
-            loss = refnet_loss(model(lfs), _to_tensor(labels[idx], device))
-            terms = {}
+            return depth_net_loss(centre, _to_tensor(lfs, device), model(centre, hint))
+        lfs = _to_tensor(data[idx], device)
+        return refnet_loss(model(lfs), _to_tensor(labels[idx], device)), {}
+
+    t0 = time.perf_counter()
+    run_steps(run, batch_loss, checkpoint_every)
+    if recipe.model == "jpeg_hance":
+        metrics = validate_hance(model, val[:, u // 2, v // 2], recipe.quality, device)
+    elif recipe.model == "depth_net":
+        metrics = validate_depth(model, hance, val, val_hints, recipe.quality, device)
+    else:
+        metrics = validate_refnet(model, val, val_labels, device)
+    return finish_run(run, metrics, t0, device)
+
+
+def run_steps(run: Run, batch_loss, checkpoint_every: int) -> None:
+    """The optimiser loop every model shares: ``batch_loss()`` gives a batch's loss and its
+    logged terms; stops at the recipe's steps or time limit, refuses a non-finite loss,
+    logs every 50 steps and checkpoints every ``checkpoint_every``."""
+    recipe = run.recipe
+    t0 = time.perf_counter()
+    while run.step < recipe.steps:
+        if recipe.time_limit_s and time.perf_counter() - t0 > recipe.time_limit_s:
+            print(f"{run.tag}: time limit reached at step {run.step}", flush=True)
+            run.save()
+            break
+        loss, terms = batch_loss()
         if not torch.isfinite(loss):
             raise SystemExit(f"{run.tag}: non-finite loss at step {run.step}")
         run.update(loss)
@@ -375,19 +388,17 @@ def train(recipe: Recipe, out: Path, device: str, resume: bool, workers: int, ch
             run.log({"loss": loss.item(), **terms, "elapsed_s": round(time.perf_counter() - t0, 1)})
         if run.step % checkpoint_every == 0 or run.step == recipe.steps:
             run.save()
-            print(f"{run.tag} step {run.step} loss {loss.item():.4f} ({time.perf_counter() - t0:.0f} s)", flush=True)
-    if recipe.model == "jpeg_hance":
-        metrics = validate_hance(model, val[:, u // 2, v // 2], recipe.quality, device)
-    elif recipe.model == "depth_net":
-        metrics = validate_depth(model, hance, val, val_hints, recipe.quality, device)
-    else:
-        metrics = validate_refnet(model, val, val_labels, device)
+            print(f"{run.tag} step {run.step} loss {loss.item():.6f} ({time.perf_counter() - t0:.0f} s)", flush=True)
+
+
+def finish_run(run: Run, metrics: dict, t0: float, device: str) -> tuple[torch.nn.Module, dict]:
+    """Records the run's time, steps and device with its validation metrics (log and stdout)."""
     metrics["train_s"] = round(time.perf_counter() - t0, 1)
     metrics["steps_done"] = run.step
     metrics["device"] = torch.cuda.get_device_name() if device.startswith("cuda") else "cpu"
     run.log({"validation": metrics})
     print(f"{run.tag} validation {metrics}", flush=True)
-    return model.eval(), metrics
+    return run.model.eval(), metrics
 
 
 def train_real_hance(recipe: Recipe, out: Path, device: str, resume: bool, checkpoint_every: int
@@ -400,46 +411,17 @@ def train_real_hance(recipe: Recipe, out: Path, device: str, resume: bool, check
     model = spec(recipe.model, recipe.preset).build().to(device)
     run = Run(out, recipe, model, resume)
     rng = np.random.default_rng(recipe.seed + run.step)  # a resumed run draws new crops
-    t0 = time.perf_counter()
-    while run.step < recipe.steps:
-        if recipe.time_limit_s and time.perf_counter() - t0 > recipe.time_limit_s:
-            print(f"{run.tag}: time limit reached at step {run.step}", flush=True)
-            run.save()
-            break
+
+    def batch_loss() -> tuple[torch.Tensor, dict]:
         x, y = real_hance_batch(views, recipe, rng)
-        loss = torch.mean((model(_to_tensor(x, device)) - _to_tensor(y, device)) ** 2)
-        if not torch.isfinite(loss):
-            raise SystemExit(f"{run.tag}: non-finite loss at step {run.step}")
-        run.update(loss)
-        if run.step % 50 == 0 or run.step == recipe.steps:
-            run.log({"loss": loss.item(), "elapsed_s": round(time.perf_counter() - t0, 1)})
-        if run.step % checkpoint_every == 0 or run.step == recipe.steps:
-            run.save()
-            print(f"{run.tag} step {run.step} loss {loss.item():.6f} ({time.perf_counter() - t0:.0f} s)", flush=True)
-    metrics = {}
-    for name, view in real_centre_views():
-        gain = validate_hance_view(model, view, 50, device)
-        metrics[f"{'train_' if name in recipe.scenes else ''}{name}_q50_psnr_gain_db"] = gain
-    metrics["train_s"] = round(time.perf_counter() - t0, 1)
-    metrics["steps_done"] = run.step
-    metrics["device"] = torch.cuda.get_device_name() if device.startswith("cuda") else "cpu"
-    run.log({"validation": metrics})
-    print(f"{run.tag} validation {metrics}", flush=True)
-    return model.eval(), metrics
+        return torch.mean((model(_to_tensor(x, device)) - _to_tensor(y, device)) ** 2), {}
 
-
-@torch.no_grad()
-def validate_hance_view(model, view: np.ndarray, quality: int, device) -> float:
-    """PSNR gain (dB) of ``model`` over its input on one view at ``quality``."""
+    t0 = time.perf_counter()
+    run_steps(run, batch_loss, checkpoint_every)
     model.eval()
-    h, w = (view.shape[0] // 8) * 8, (view.shape[1] // 8) * 8
-    view = np.ascontiguousarray(view[:h, :w])
-    degrade = deblocked_jpeg if model.config.after_deblock else jpeg_roundtrip
-    dec = _to_tensor(degrade(view, quality), device)[None]
-    ref = _to_tensor(view, device)[None]
-    gain = round(_psnr(model(dec), ref) - _psnr(dec, ref), 3)
-    model.train()
-    return gain
+    metrics = {f"{'train_' if name in recipe.scenes else ''}{name}_q50_psnr_gain_db":
+               round(_hance_gain(model, view, 50, device), 3) for name, view in real_centre_views()}
+    return finish_run(run, metrics, t0, device)
 
 
 def main(argv: list[str] | None = None) -> int:

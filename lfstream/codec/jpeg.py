@@ -84,11 +84,14 @@ def deblock_jpeg(img: np.ndarray, scale: float) -> np.ndarray:
     return cv2.bilateralFilter(np.ascontiguousarray(img), 5, DEBLOCK_STRENGTH * float(scale), 2)
 
 
-def jpeg_roundtrip(img: np.ndarray, quality: int) -> np.ndarray:
-    """A uint8 RGB image through JPEG at ``quality`` and back, unfiltered: what JPEG-Hance
-    takes (training and benchmarks); the decoder's default also post-filters it
-    (:func:`deblock_jpeg`)."""
-    return decode_jpeg(encode_jpeg(img, quality), img.shape[:2])
+def jpeg_roundtrip(img: np.ndarray, quality: int, deblock: bool = False) -> np.ndarray:
+    """A uint8 RGB image through JPEG at ``quality`` and back: unfiltered by default (what
+    the paper JPEG-Hance takes), or with ``deblock`` the decoder's post-filter at the JPEG's
+    own strength (:func:`deblock_jpeg`: what the decoder's default shows, and what a network
+    trained after the filter takes)."""
+    data = encode_jpeg(img, quality)
+    out = decode_jpeg(data, img.shape[:2])
+    return deblock_jpeg(out, jpeg_quality_scale(data) or 0.0) if deblock else out
 
 
 __all__ = ["QUALITY_RANGE", "DEBLOCK_STRENGTH", "encode_jpeg", "decode_jpeg", "jpeg_quality_scale", "deblock_jpeg",

@@ -78,3 +78,17 @@ def test_cli_decode_no_deblock_gives_the_raw_jpeg_centre(tmp_path):
     jpeg = split_stream(data)[1][0].image
     np.testing.assert_array_equal(raw[0, 1, 1], decode_jpeg(jpeg, (48, 64)))
     np.testing.assert_array_equal(filtered[0, 1, 1], deblock_jpeg(decode_jpeg(jpeg, (48, 64)), jpeg_quality_scale(jpeg)))
+
+
+def test_roundtrip_with_deblock_is_the_decoders_filtered_view():
+    """``jpeg_roundtrip(..., deblock=True)`` (a post-filter network's training input) is the
+    decoded JPEG filtered at that JPEG's own strength, as the decoder shows it."""
+    from lfstream.codec.jpeg import jpeg_roundtrip
+
+    img = synth_clip(1, 1, (64, 96), seed=12, noise=2.0, motion=0).lf[0, 0, 0]
+    data = encode_jpeg(img, 40)
+    plain = decode_jpeg(data, img.shape[:2])
+    assert (jpeg_roundtrip(img, 40) == plain).all()
+    filtered = jpeg_roundtrip(img, 40, deblock=True)
+    assert (filtered == deblock_jpeg(plain, jpeg_quality_scale(data))).all()
+    assert (filtered != plain).any()
