@@ -21,7 +21,7 @@ def ssim_images(ref, test, channels, g, scale, c1, c2, out):  # pragma: no cover
     Args:
         ref, test: (N, H, W*C) uint8 or float32 images, rows flattened channels-last.
         channels: C.
-        g: (K,) float32 normalised 1-D Gaussian (K odd, K <= H, W).
+        g: (K,) float32 normalised 1-D Gaussian (K odd, K <= H, W; symmetric: ``g[t] == g[K-1-t]``).
         scale: multiplies the samples into the unit range (1/255 for uint8).
         c1, c2: the stabilising constants (K1**2, K2**2 for a unit range).
         out: (N,) float64, overwritten.
@@ -54,31 +54,35 @@ def ssim_images(ref, test, channels, g, scale, c1, c2, out):  # pragma: no cover
             slot = y % k
             # tap-outer loops over slices indexed from 0: no negative-index checks, so LLVM
             # vectorises them (a computed index j + offset kept them scalar, 8x slower)
+            # the Gaussian is symmetric: taps t and k - 1 - t share a weight, so each pass adds
+            # a pair of rows (6 multiplies instead of 11: measured 290 -> 225 ms for 7x7 views)
             for m in range(5):
                 dst = ring[m, slot]
-                src = rows[m, :wv]
-                g0 = g[0]
+                src = rows[m, r * c : r * c + wv]
+                gr = g[r]
                 for j in range(wv):
-                    dst[j] = g0 * src[j]
-                for t in range(1, k):
+                    dst[j] = gr * src[j]
+                for t in range(r):
                     gt = g[t]
-                    src = rows[m, t * c : t * c + wv]
+                    s0 = rows[m, t * c : t * c + wv]
+                    s1 = rows[m, (k - 1 - t) * c : (k - 1 - t) * c + wv]
                     for j in range(wv):
-                        dst[j] += gt * src[j]
+                        dst[j] += gt * (s0[j] + s1[j])
             if y < k - 1:
                 continue
             top = y - (k - 1)  # the output row's window is rows top .. y
             for m in range(5):
                 dst = acc[m]
-                src = ring[m, top % k]
-                g0 = g[0]
+                src = ring[m, (top + r) % k]
+                gr = g[r]
                 for j in range(wv):
-                    dst[j] = g0 * src[j]
-                for t in range(1, k):
+                    dst[j] = gr * src[j]
+                for t in range(r):
                     gt = g[t]
-                    src = ring[m, (top + t) % k]
+                    s0 = ring[m, (top + t) % k]
+                    s1 = ring[m, (top + k - 1 - t) % k]
                     for j in range(wv):
-                        dst[j] += gt * src[j]
+                        dst[j] += gt * (s0[j] + s1[j])
             row = 0.0
             a0, a1, a2, a3, a4 = acc[0], acc[1], acc[2], acc[3], acc[4]
             for j in range(wv):
@@ -87,6 +91,12 @@ def ssim_images(ref, test, channels, g, scale, c1, c2, out):  # pragma: no cover
                 va = a2[j] - ma * ma
                 vb = a3[j] - mb * mb
                 cv = a4[j] - ma * mb
-                row += ((2 * ma * mb + c1) * (2 * cv + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2))
+                # the denominators as the numerators plus what vanishes for equal images
+                # ((ma - mb)^2 and va + vb - 2 cv): SSIM(a, a) is 1 whatever the rounding
+                num1 = 2 * ma * mb + c1
+                num2 = 2 * cv + c2
+                den1 = num1 + (ma - mb) * (ma - mb)
+                den2 = num2 + (va + vb - 2 * cv)
+                row += (num1 * num2) / (den1 * den2)
             total += row
         out[i] = total / (hv * wv)

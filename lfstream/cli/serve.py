@@ -35,7 +35,9 @@ def run(args: argparse.Namespace) -> int:
         if not args.json:
             print(f"listening on {receiver.address[0]}:{receiver.address[1]} -> {out}", file=sys.stderr)
         try:
-            summary = Pipeline(None, cfg, out, receiver=receiver, progress=_pipeline.progress_callback(args)).run()
+            with _pipeline.single_threaded_opencv():
+                summary = Pipeline(None, cfg, out, receiver=receiver,
+                                   progress=_pipeline.progress_callback(args)).run()
         except KeyboardInterrupt:
             summary = stopped_summary("tcp")
         _pipeline.write_page(args, summary, out)

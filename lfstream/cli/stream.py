@@ -62,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
         pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
                         present=source.present)
-        summary = pipe.run()
+        with _pipeline.single_threaded_opencv():
+            summary = pipe.run()
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)
         summary = stopped_summary("tcp" if args.to else args.transport)

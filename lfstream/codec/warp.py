@@ -96,7 +96,7 @@ def warp_views(
         cols, col_w = _linear_taps(w, gains.shape[3])
     out = np.empty((u, v, h, w * c), np.uint8)
     d = np.ascontiguousarray(d)
-    packed = np.empty(h * w, np.uint64)
+    packed = np.empty((h + 2) * (w + 2), np.uint64)  # with a one-pixel border (pack_lanes)
     for ch0 in range(0, c, _LANES):  # three channels per pass, in the lanes of one uint64
         n_ch = min(_LANES, c - ch0)
         pack_lanes(src, ch0, n_ch, packed)

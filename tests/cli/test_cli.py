@@ -299,3 +299,27 @@ def test_planes_record_their_refocus_distance_when_the_camera_is_given(capsys, t
         assert p["distance_m"] is None or p["distance_m"] == pytest.approx(ref.focus_m, rel=1e-4)
     finite = [p["distance_m"] for p in planes if p["distance_m"] is not None]
     assert len(finite) >= 2 and all(a > b for a, b in zip(finite, finite[1:]))  # nearer planes: shorter distances
+
+
+def test_stream_runs_opencv_single_threaded_and_restores_it(capsys, tmp_path, monkeypatch):
+    import cv2
+
+    from lfstream.stream import pipeline
+
+    seen = []
+    original = pipeline.Pipeline.run
+
+    def run_and_record(self):
+        seen.append(cv2.getNumThreads())
+        return original(self)
+
+    monkeypatch.setattr(pipeline.Pipeline, "run", run_and_record)
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(2)
+    try:
+        code, out_text, _ = run(capsys, "stream", "--frames", "1", "--save", "", "-o", tmp_path / "s", "--json")
+        assert code == 0 and json.loads(out_text)["frames"] == 1
+        assert seen == [1]  # the pipeline's stages are the parallelism (lfstream.cli._pipeline)
+        assert cv2.getNumThreads() == 2  # and the process's setting comes back
+    finally:
+        cv2.setNumThreads(before)

@@ -26,6 +26,28 @@ def _bilinear(img, y, x):
     return top * (1 - ay) + bot * ay
 
 
+def test_grey_block_means_equal_opencvs_conversion_and_area_resampling(rng):
+    import cv2
+
+    from lfstream.codec._kernels import block_luma
+
+    # every 8-bit colour: the fixed-point grey is OpenCV's COLOR_RGB2GRAY to the level
+    v = np.arange(1 << 24, dtype=np.uint32)
+    colours = np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], -1).astype(np.uint8).reshape(1, 1, 4096, 4096, 3)
+    out = np.empty((1, 4096, 4096), np.float32)
+    block_luma(colours, np.zeros((1, 2), np.int64), 1, out)
+    grey = cv2.cvtColor(colours[0, 0], cv2.COLOR_RGB2GRAY)
+    np.testing.assert_array_equal(np.rint(out[0] * 255).astype(np.uint8), grey)
+    # block means as OpenCV's area resampling of that grey, to the bit at the working scales in use
+    lf = rng.integers(0, 256, (3, 3, 37, 53, 3), dtype=np.uint8)
+    keys = [(1, 1), (0, 2), (2, 0)]
+    for scale in (1, 2, 4, 8):
+        hs, ws = 37 // scale, 53 // scale
+        ref = np.stack([cv2.resize(cv2.cvtColor(lf[k][: hs * scale, : ws * scale], cv2.COLOR_RGB2GRAY)
+                                   .astype(np.float32), (ws, hs), interpolation=cv2.INTER_AREA) for k in keys])
+        np.testing.assert_array_equal(H._grids(lf, keys, scale), ref * np.float32(1 / 255.0))
+
+
 def test_sweep_cost_matches_a_plain_reference(rng):
     images = rng.random((4, 9, 11), dtype=np.float32)
     offsets = np.float32([[-1, -1], [0, 2], [1.5, -0.5]])
