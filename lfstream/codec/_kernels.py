@@ -351,24 +351,27 @@ _GRAY_R, _GRAY_G, _GRAY_B = 9798, 19235, 3735
 
 @numba.njit(**_ROW)
 def _block_luma_view(img, scale, out):  # pragma: no cover - compiled
-    """``out[i, j]`` = mean over the ``scale x scale`` block ``(i, j)`` of the 8-bit grey of
-    ``img``, divided by 255; whole blocks only."""
+    """``out[i, j]`` = mean of the 8-bit grey of ``img`` over the ``scale x scale`` block
+    ``(i, j)``, divided by 255; a block the view ends inside (a view smaller than one block)
+    averages the pixels it has, as OpenCV's area resampling of them does."""
     hs, ws = out.shape
+    h, w = img.shape[0], img.shape[1]
     sums = np.empty(ws, np.int32)
     half = np.int32(1 << (_GRAY_BITS - 1))
-    inv = np.float32(1.0 / (scale * scale))
     for i in range(hs):
+        y1 = min((i + 1) * scale, h)
         sums[:] = 0
-        for y in range(i * scale, (i + 1) * scale):
+        for y in range(i * scale, y1):
             row = img[y]
             for j in range(ws):
                 t = np.int32(0)
-                for x in range(j * scale, (j + 1) * scale):
+                for x in range(j * scale, min((j + 1) * scale, w)):
                     t += (_GRAY_R * np.int32(row[x, 0]) + _GRAY_G * np.int32(row[x, 1]) + _GRAY_B * np.int32(row[x, 2])
                           + half) >> _GRAY_BITS
                 sums[j] += t
         for j in range(ws):
-            out[i, j] = (np.float32(sums[j]) * inv) * np.float32(1.0 / 255.0)
+            count = (y1 - i * scale) * (min((j + 1) * scale, w) - j * scale)
+            out[i, j] = (np.float32(sums[j]) * np.float32(1.0 / count)) * np.float32(1.0 / 255.0)
 
 
 @numba.njit(**_PARALLEL)
@@ -379,7 +382,7 @@ def block_luma(lf, keys, scale, out):  # pragma: no cover - compiled
 
     Args:
         lf: (U, V, H, W, 3) uint8; keys: (N, 2) int64 views; scale: block size in pixels.
-        out: (N, H // scale, W // scale) float32 in [0, 1], overwritten.
+        out: (N, max(1, H // scale), max(1, W // scale)) float32 in [0, 1], overwritten.
     """
     for n in numba.prange(keys.shape[0]):
         _block_luma_view(lf[keys[n, 0], keys[n, 1]], scale, out[n])
@@ -641,4 +644,3 @@ def add_i420_residual(lf, planes, positions, offset):  # pragma: no cover - comp
         k = job // h
         y = job % h
         _i420_residual_row(lf[positions[k, 0], positions[k, 1], y], planes[k].ravel(), y, ph, pw, np.int32(offset))
-

@@ -185,8 +185,7 @@ def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int) -> np.ndarra
     from lfstream.codec._kernels import block_luma
 
     h, w = lf.shape[2:4]
-    scale = max(1, min(scale, h, w))
-    out = np.empty((len(keys), h // scale, w // scale), np.float32)
+    out = np.empty((len(keys), max(1, h // scale), max(1, w // scale)), np.float32)
     block_luma(lf, np.asarray(keys, np.int64).reshape(-1, 2), scale, out)
     return out
 

@@ -46,6 +46,12 @@ def test_grey_block_means_equal_opencvs_conversion_and_area_resampling(rng):
         ref = np.stack([cv2.resize(cv2.cvtColor(lf[k][: hs * scale, : ws * scale], cv2.COLOR_RGB2GRAY)
                                    .astype(np.float32), (ws, hs), interpolation=cv2.INTER_AREA) for k in keys])
         np.testing.assert_array_equal(H._grids(lf, keys, scale), ref * np.float32(1 / 255.0))
+    # a view smaller than one block: the mean of the pixels it has, at the caller's scale
+    # (3 x 9 pixels in blocks of 4: one row of two blocks, the ninth column left out)
+    small = np.ascontiguousarray(lf[:, :, :3, :9])
+    ref = cv2.resize(cv2.cvtColor(small[1, 1, :, :8], cv2.COLOR_RGB2GRAY).astype(np.float32), (2, 1),
+                     interpolation=cv2.INTER_AREA) / 255.0
+    np.testing.assert_allclose(H._grids(small, [(1, 1)], 4)[0], ref, rtol=0, atol=1e-6)
 
 
 def test_sweep_cost_matches_a_plain_reference(rng):
