@@ -52,17 +52,19 @@ HALF_VIEWS_FORMAT = 3  # the views at half the size in each dimension
 #: half size (up-sampled bicubically at decode: the lowest rates of scenes no warp predicts;
 #: toys_array: 0.013-0.023 bpp at 21.0-22.9 dB, where full-size views cannot go under 0.026).
 RESIDUAL_MODES = ("prediction", "views", "half-views")
+#: The modes that code the views themselves (the decoder does not warp).
+VIEW_MODES = ("views", "half-views")
 _FORMAT_MODES = {RESIDUAL_FORMAT: "prediction", VIEWS_FORMAT: "views", HALF_VIEWS_FORMAT: "half-views"}
+_HEAD = struct.Struct("<BBH")
+_LEN = struct.Struct("<I")
+#: Residual values are stored with this offset (8-bit mid-grey is "no correction").
+OFFSET = 128
 
 
 def coded_size(size: tuple[int, int], mode: str) -> tuple[int, int]:
     """The size a residual's views are coded at (before padding to even)."""
     h, w = size
     return ((h + 1) // 2, (w + 1) // 2) if mode == "half-views" else (h, w)
-_HEAD = struct.Struct("<BBH")
-_LEN = struct.Struct("<I")
-#: Residual values are stored with this offset (8-bit mid-grey is "no correction").
-OFFSET = 128
 
 
 def residual_views(views: tuple[int, int]) -> list[tuple[int, int]]:
@@ -83,10 +85,6 @@ def check_residual_mode(mode: str) -> str:
     if mode not in RESIDUAL_MODES:
         raise LFValueError(f"residual_mode: one of {', '.join(RESIDUAL_MODES)}, got {mode!r}")
     return mode
-
-
-#: The modes that code the views themselves (the decoder does not warp).
-VIEW_MODES = ("views", "half-views")
 
 
 def residual_mode(data: bytes) -> str | None:
@@ -232,14 +230,15 @@ def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None) -> np.
     planes = decode_residual(data, (u, v), (h, w), frame)
     positions = np.array(residual_views((u, v)), np.int64)
     offset = OFFSET
-    if residual_mode(data) == "half-views":  # small views: converted, then up-sampled
+    mode = residual_mode(data)
+    if mode == "half-views":  # small views: converted, then up-sampled
         import cv2
 
         ch, cw = coded_size((h, w), "half-views")
         for (a, b), p in zip(positions, planes):
             cv2.resize(i420_to_rgb(p)[:ch, :cw], (w, h), dst=lf[a, b], interpolation=cv2.INTER_CUBIC)
         return lf
-    if residual_mode(data) == "views":  # zero plus the views, offset 0: the views themselves
+    if mode == "views":  # zero plus the views, offset 0: the views themselves
         lf[positions[:, 0], positions[:, 1]] = 0
         offset = 0
     add_i420_residual(lf, planes, positions, offset)
