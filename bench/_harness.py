@@ -22,6 +22,13 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+#: The real samples beside the repository (read ../shared/data/README.md).
+SHARED = ROOT.parent / "shared" / "data"
+#: Every real scene there, by the name benchmarks and training report it under -> the
+#: folder (under :data:`SHARED`) that holds its light field.
+SHARED_SCENES = {"seahorse": "seahorse5x5/camImagesFlat", "dino": "hci_star/dino", "cotton": "hci_star/cotton",
+                 "lytro_bikes": "lytro_bikes", "lytro_translucent": "lytro_translucent", "toys_array": "toys_array"}
+
 
 def _version_of(module: str) -> str | None:
     try:

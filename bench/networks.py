@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from _harness import ROOT, emit, parser, timeit
+from _harness import SHARED, SHARED_SCENES, emit, parser, timeit
 
 import lfstream
 from lfstream.codec import decode
@@ -33,18 +33,12 @@ from lfstream.models.registry import load_model, manifest_entry
 from lfstream.refocus import focal_stack
 from lfstream.synth import synth_clip
 
-SHARED = ROOT.parent / "shared" / "data"
-
-
-REAL = {"seahorse": "seahorse5x5/camImagesFlat", "dino": "hci_star/dino", "cotton": "hci_star/cotton",
-        "lytro_bikes": "lytro_bikes", "lytro_translucent": "lytro_translucent", "toys_array": "toys_array"}
-
 
 def real_lfs(names: tuple[str, ...] = ("seahorse", "dino", "cotton")) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
     out = []
     for name in names:
-        if (SHARED / REAL[name]).exists():
-            lf, mask = lfstream.read_lf(SHARED / REAL[name], return_mask=True)
+        if (SHARED / SHARED_SCENES[name]).exists():
+            lf, mask = lfstream.read_lf(SHARED / SHARED_SCENES[name], return_mask=True)
             out.append((name, lf, None if mask.all() else mask))
     return out
 
@@ -67,7 +61,7 @@ def synthetic_lfs(count: int, size: tuple[int, int], seed: int = 5000) -> list[t
 def bench_hance(device: str, runs: int, quick: bool) -> list[dict]:
     rows = []
     views = [(n, lf[lf.shape[0] // 2, lf.shape[1] // 2]) for n, lf, _ in synthetic_lfs(2 if quick else 6, (128, 128))]
-    views += [(n, lf[lf.shape[0] // 2, lf.shape[1] // 2]) for n, lf, _ in real_lfs(tuple(REAL))]
+    views += [(n, lf[lf.shape[0] // 2, lf.shape[1] // 2]) for n, lf, _ in real_lfs(tuple(SHARED_SCENES))]
     for preset in ("fast", "paper"):
         if manifest_entry("jpeg_hance", preset) is None:
             continue
@@ -111,7 +105,7 @@ def hance_lf_rows(device: str, quick: bool) -> list[dict]:
     if manifest_entry("jpeg_hance", "fast") is None:
         return rows
     seen = trained_on("jpeg_hance", "fast")
-    for name, lf, mask in real_lfs(tuple(REAL)[:1] if quick else tuple(REAL)):
+    for name, lf, mask in real_lfs(tuple(SHARED_SCENES)[:1] if quick else tuple(SHARED_SCENES)):
         data = lfstream.encode(lf, present=mask)
         ref = lf if mask is None else lf[mask][:, None]
         row = {"model": "jpeg_hance", "preset": "fast", "lf": name, "held_out": name not in seen,

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from _harness import ROOT, emit, parser
+from _harness import ROOT, SHARED, SHARED_SCENES, emit, parser
 
 import lfstream
 from lfstream.codec.baseline import decode_views, encode_views
@@ -34,7 +34,6 @@ from lfstream.metrics import bd_psnr, bd_rate, bpp, capped, mpsnr, mssim
 from lfstream.synth import synth_clip
 
 os.environ.setdefault("SVT_LOG", "1")
-SHARED = ROOT.parent / "shared" / "data"
 ANCHOR = "x265 medium"
 QUALITIES = (10, 25, 40, 55, 70, 85, 95)
 TARGETS = (0.005, 0.01, 0.02, 0.04, 0.08, 0.1)
@@ -49,9 +48,7 @@ PRESETS = ("fast", "balanced", "best")
 def scenes(quick: bool, only: set[str] | None) -> list[tuple[str, np.ndarray]]:
     size = (128, 160) if quick else (375, 540)
     out = [("synthetic", synth_clip(1, 7, size, seed=21, noise=2.0, vignetting=0.3, motion=0, camera_pan=0).lf[0])]
-    folders = [("seahorse", "seahorse5x5/camImagesFlat"), ("dino", "hci_star/dino"), ("cotton", "hci_star/cotton"),
-               ("lytro_bikes", "lytro_bikes"), ("lytro_translucent", "lytro_translucent"), ("toys_array", "toys_array")]
-    for name, folder in folders:
+    for name, folder in SHARED_SCENES.items():
         if not (SHARED / folder).exists() or (quick and name != "seahorse"):
             continue
         if folder.startswith("hci"):

@@ -35,15 +35,16 @@ import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+for path in (ROOT, ROOT / "bench"):
+    if str(path) not in sys.path:
+        sys.path.insert(0, str(path))
+
+from _harness import SHARED, SHARED_SCENES  # noqa: E402  (the shared samples' one table)
 
 from lfstream.codec import jpeg_roundtrip  # noqa: E402
 from lfstream.lightfield import to_network_input  # noqa: E402
 from lfstream.models.losses import depth_net_loss, hance_loss, refnet_loss  # noqa: E402
 from lfstream.models.registry import MODEL_NAMES, load_model, save_checkpoint, ship_weights, spec  # noqa: E402
-
-SHARED = ROOT.parent / "shared" / "data"
 
 
 @dataclass
@@ -75,9 +76,6 @@ DEFAULT_STEPS = {"jpeg_hance": 3000, "depth_net": 3000, "refnet": 3000}
 HANCE_TRAIN_SCENES = ("lytro_bikes", "dino", "toys_array")
 #: JPEG qualities it trains at: around the default (50) and where rate control goes.
 HANCE_QUALITIES = (30, 40, 50, 60, 70)
-#: Every real scene the shared data holds (name -> folder under ../shared/data).
-REAL_SCENES = {"seahorse": "seahorse5x5/camImagesFlat", "dino": "hci_star/dino", "cotton": "hci_star/cotton",
-               "lytro_bikes": "lytro_bikes", "lytro_translucent": "lytro_translucent", "toys_array": "toys_array"}
 DEFAULT_BATCH = {"jpeg_hance": 32, "depth_net": 8, "refnet": 8}
 DEFAULT_CROP = {"jpeg_hance": 64, "depth_net": 96, "refnet": 128}
 
@@ -117,12 +115,12 @@ def render_dataset(count: int, views: int, size: int, seed: int, workers: int) -
 
 
 def real_views(scenes: tuple[str, ...]) -> list[np.ndarray]:
-    """Every present view of ``scenes`` (``REAL_SCENES`` keys), each ``(H, W, 3)`` uint8."""
+    """Every present view of ``scenes`` (``SHARED_SCENES`` keys), each ``(H, W, 3)`` uint8."""
     from lfstream.io import read_lf
 
     out = []
     for name in scenes:
-        lf, mask = read_lf(SHARED / REAL_SCENES[name], return_mask=True)
+        lf, mask = read_lf(SHARED / SHARED_SCENES[name], return_mask=True)
         out += [np.ascontiguousarray(lf[u, v]) for u, v in zip(*np.nonzero(mask))]
     return out
 
@@ -196,7 +194,7 @@ def real_centre_views() -> list[tuple[str, np.ndarray]]:
     try:
         from lfstream.io import read_lf
 
-        for scene, folder in REAL_SCENES.items():
+        for scene, folder in SHARED_SCENES.items():
             if (SHARED / folder).exists():
                 lf, _ = read_lf(SHARED / folder, return_mask=True)
                 out.append((scene, lf[lf.shape[0] // 2, lf.shape[1] // 2]))
