@@ -6,8 +6,6 @@ import argparse
 import time
 from pathlib import Path
 
-import numpy as np
-
 from lfstream.cli._common import emit, int_in
 from lfstream.codec.decoder import BATCH_RANGE, DEPTH_MODES, HANCE_MODES
 
@@ -33,7 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.codec.decoder import iter_decode
+    from lfstream.codec.decoder import iter_decode, stack_frames
     from lfstream.errors import BitstreamError, LFFileError
     from lfstream.io import write_lf, write_pfm
     from lfstream.io._fs import check_new_file
@@ -58,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     decode_s = time.perf_counter() - t0
     if frames:
         # a damaged stream still gives a valid output of every frame before the damage
-        write_lf(args.output, np.stack(frames), overwrite=args.overwrite)
+        write_lf(args.output, stack_frames(frames), overwrite=args.overwrite)
     if error is not None:
         done = (f"{len(frames)} complete frame(s) before it written to {args.output}" if frames
                 else "no complete frame, nothing written")
