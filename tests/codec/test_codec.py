@@ -244,3 +244,21 @@ def test_decode_with_networks_and_switches(tmp_path):
     dec = np.load(out)
     # batched network inference may differ in the last float bit, so by at most one level
     assert np.abs(dec.astype(int) - lfstream.decode(data, depth="net", hance="off")).max() <= 1
+
+
+def test_decode_of_one_frame_is_the_decoded_frame_without_a_copy():
+    from lfstream.codec.decoder import iter_decode, stack_frames
+
+    clip = synth_clip(2, 3, (24, 32), seed=5).lf
+    one = lfstream.encode(clip[0])
+    out = lfstream.decode(one)
+    frame = next(iter_decode(io.BytesIO(one))).lf
+    assert out.shape == (1, *frame.shape) and out.flags.c_contiguous
+    np.testing.assert_array_equal(out[0], frame)
+    frames = [frame, frame + 1]
+    assert np.shares_memory(stack_frames(frames[:1]), frames[0])
+    both = stack_frames(frames)
+    assert both.shape == (2, *frame.shape) and not np.shares_memory(both, frames[0])
+    two = lfstream.decode(lfstream.encode(clip))
+    assert two.shape == (2, *frame.shape)
+    np.testing.assert_array_equal(two[0], frame)
