@@ -89,19 +89,26 @@ def pack_lanes(img, ch0, n_ch, packed):  # pragma: no cover - compiled
     position clamped to ``[-1, W - 1]`` then reads exactly what clamping each of its two
     taps to ``[0, W - 1]`` would, so a sample needs one index instead of four.
 
+    A row's interior is packed one channel at a time (loops that vectorise; a clamped
+    loop over every padded pixel took 6 ns a pixel), then its two border pixels copied.
+
     Args:
         img: (H, W, C) uint8; packed: ((H + 2) * (W + 2),) uint64, overwritten.
     """
-    h, w, _ = img.shape
+    h, w, c = img.shape
     w2 = w + 2
+    flat = img.reshape(h, w * c)
     for yy in range(h + 2):
-        y = min(max(yy - 1, 0), h - 1)
-        for xx in range(w2):
-            x = min(max(xx - 1, 0), w - 1)
-            p = np.uint64(0)
-            for j in range(n_ch):
-                p |= np.uint64(img[y, x, ch0 + j]) << np.uint64(_LANE * j)
-            packed[yy * w2 + xx] = p
+        row = flat[min(max(yy - 1, 0), h - 1)]
+        dst = packed[yy * w2 + 1: yy * w2 + 1 + w]
+        for x in range(w):
+            dst[x] = np.uint64(row[x * c + ch0])
+        for j in range(1, n_ch):
+            shift = np.uint64(_LANE * j)
+            for x in range(w):
+                dst[x] |= np.uint64(row[x * c + ch0 + j]) << shift
+        packed[yy * w2] = dst[0]
+        packed[yy * w2 + w + 1] = dst[w - 1]
 
 
 @numba.njit(**_ROW)
