@@ -498,25 +498,34 @@ def sweep_cost(images, offsets, shifts, cost):  # pragma: no cover - compiled
 
 
 @numba.njit(**_ROW)
-def _winner_row(cost, shifts, y, out_row):  # pragma: no cover - compiled
+def _winner_row(cost, shifts, y, best, c_best, out_row):  # pragma: no cover - compiled
+    """One row of :func:`winner_subpixel`; ``best`` (w,) int32 and ``c_best`` (w,) float32
+    scratch. The candidates are the outer loop, so each pass reads one contiguous cost
+    row and vectorises (the first minimum wins, as in a per-pixel scan)."""
     n_d, _, w = cost.shape
     step = shifts[1] - shifts[0]
+    row0 = cost[0, y]
     for x in range(w):
-        best = 0
-        c_best = cost[0, y, x]
-        for k in range(1, n_d):
-            c = cost[k, y, x]
-            if c < c_best:
-                c_best = c
-                best = k
+        best[x] = 0
+        c_best[x] = row0[x]
+    for k in range(1, n_d):
+        row = cost[k, y]
+        kk = np.int32(k)
+        for x in range(w):
+            c = row[x]
+            better = c < c_best[x]
+            c_best[x] = c if better else c_best[x]
+            best[x] = kk if better else best[x]
+    for x in range(w):
+        b = best[x]
         off = np.float32(0.0)
-        if 0 < best < n_d - 1:
-            cm = cost[best - 1, y, x]
-            cp = cost[best + 1, y, x]
-            denom = cm - 2 * c_best + cp
+        if 0 < b < n_d - 1:
+            cm = cost[b - 1, y, x]
+            cp = cost[b + 1, y, x]
+            denom = cm - 2 * c_best[x] + cp
             if denom > 1e-9:
                 off = min(max(np.float32(0.5) * (cm - cp) / denom, np.float32(-0.5)), np.float32(0.5))
-        out_row[x] = shifts[best] + off * step
+        out_row[x] = shifts[b] + off * step
 
 
 @numba.njit(**_PARALLEL)
@@ -528,8 +537,9 @@ def winner_subpixel(cost, shifts, out):  # pragma: no cover - compiled
         shifts: (D,) float32 evenly spaced candidates.
         out: (h, w) float32, overwritten with the refined candidate value.
     """
+    w = cost.shape[2]
     for y in numba.prange(cost.shape[1]):
-        _winner_row(cost, shifts, y, out[y])
+        _winner_row(cost, shifts, y, np.empty(w, np.int32), np.empty(w, np.float32), out[y])
 
 
 @numba.njit(**_ROW)
