@@ -78,6 +78,26 @@ def test_winner_subpixel_finds_the_parabola_minimum():
     assert np.allclose(out, true, atol=1e-5)
 
 
+
+def test_winner_subpixel_matches_a_plain_reference_with_ties(rng):
+    # costs on a coarse grid of values, so many pixels have several equal minima: the
+    # first (lowest) candidate must win, as a per-pixel scan picks it
+    shifts = np.linspace(-2, 2, 11).astype(np.float32)
+    cost = (rng.integers(0, 6, (11, 7, 23)) * 0.25).astype(np.float32)
+    out = np.empty((7, 23), np.float32)
+    winner_subpixel(cost, shifts, out)
+    step = shifts[1] - shifts[0]
+    for y in range(7):
+        for x in range(23):
+            c = cost[:, y, x]
+            k = int(np.argmin(c))  # numpy's argmin: the first minimum
+            off = 0.0
+            if 0 < k < 10:
+                denom = c[k - 1] - 2 * c[k] + c[k + 1]
+                if denom > 1e-9:
+                    off = min(max(0.5 * (c[k - 1] - c[k + 1]) / denom, -0.5), 0.5)
+            assert abs(out[y, x] - (shifts[k] + off * step)) < 1e-6, (y, x)
+
 def _jbu_reference(small, gsmall, guide, scale, lut, y, x):
     hs, ws = small.shape
     py = min(max((y + 0.5) / scale - 0.5, 0.0), hs - 1.0)
