@@ -140,22 +140,26 @@ def _splat_view(disp, cols, du, dv, dview, targets):  # pragma: no cover - compi
 
 
 @numba.njit(**_ROW)
-def _row_disparity(disp_row, dview_row, cols, src_x, d_row):  # pragma: no cover - compiled
-    """One view row's disparity and the column each pixel takes its sampling position from
-    (``src_x``, float32).
+def _row_disparity(disp_row, dview_row, d_row):  # pragma: no cover - compiled
+    """One view row's disparity: splatted pixels keep their own; a hole run takes the
+    disparity of its nearest splatted neighbour on the background side (the smaller
+    disparity), so the background is extended, not the occluder; a row nothing landed on
+    falls back to the centre map. Every pixel then samples at its own position with that
+    disparity.
 
-    Splatted pixels use their own; a disoccluded run copies the position of the nearest
-    splatted pixel on its background side (the smaller disparity), so the background is
-    extended, not the occluder; a row nothing landed on falls back to the centre map.
+    Most holes are one-pixel cracks where a surface stretches between views, not
+    disocclusions: sampling them at their own position interpolates the surface, where
+    repeating the neighbour's sample position (the rule before) duplicated a pixel. Measured
+    at the default encode: MPSNR +0.07 (synthetic) … +0.34 dB (lytro_bikes) on all six
+    scenes, toys_array's disocclusions included (+0.24 dB, MSSIM +0.016).
+
     The row is copied whole first (a loop that vectorises) and only the runs are then
-    rewritten (bikes: 96 % of the outer views' rows have a hole, 1.8 % of the pixels are
-    one; a for loop with a run state, or a per-16-pixel minimum that skips whole blocks,
-    measured slower than this while loop).
+    rewritten (a for loop with a run state, or a per-16-pixel minimum that skips whole
+    blocks, measured slower than this while loop).
     """
     w = disp_row.shape[0]
     for x in range(w):
         d_row[x] = dview_row[x]
-        src_x[x] = cols[x]
     x = 0
     while x < w:
         if dview_row[x] > _HOLE_TEST:
@@ -177,15 +181,14 @@ def _row_disparity(disp_row, dview_row, cols, src_x, d_row):  # pragma: no cover
             src = left if dview_row[left] <= dview_row[right] else right
         for xx in range(start, x):
             d_row[xx] = dview_row[src]
-            src_x[xx] = cols[src]
 
 
 @numba.njit(**_ROW)
 def _row_taps(d_row, cols, y, du, dv, h, idx, fxs, fys):  # pragma: no cover - compiled
     """Flat index of the top-left bilinear tap in the padded centre view (:func:`pack_lanes`)
-    and the 1/1024-pixel fractions of one view row; pixel x samples from column ``cols[x]``
-    (float32: x itself, or where a disocclusion takes its position from; a float array,
-    not the loop counter, keeps the loop vectorised)."""
+    and the 1/1024-pixel fractions of one view row; pixel x samples at column ``cols[x] +
+    d_row[x] * dv`` (``cols``: x as float32; a float array, not the loop counter, keeps the
+    loop vectorised)."""
     w = d_row.shape[0]
     fy = np.float32(y)
     for x in range(w):
@@ -278,8 +281,8 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, offsets, occlusion, gains,
     View (u, v) pixel (y, x) samples the centre at ``(y + d * du, x + d * dv)``, ``(du, dv) =
     offsets[u, v]`` (:func:`lfstream.lightfield.view_offsets`; bilinear,
     1/1024-pixel fixed point, border replicated), where ``d`` is the centre
-    map forward-splatted into the view with a z-test, holes filled from the background side
-    (``occlusion``), or the centre map at the view pixel; the sample is multiplied by the
+    map forward-splatted into the view with a z-test, holes given the background side's
+    disparity (``occlusion``; :func:`_row_disparity`), or the centre map at the view pixel; the sample is multiplied by the
     view's gain map, bilinearly up-sampled (OpenCV's INTER_LINEAR resize), and rounded.
 
     Args:
@@ -305,7 +308,6 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, offsets, occlusion, gains,
     for task in numba.prange(chunks):
         dview = np.empty((h, w), np.float32)
         d_row = np.empty(w, np.float32)
-        src_x = np.empty(w, np.float32)
         cols = np.arange(w).astype(np.float32)
         targets = np.empty(w, np.int32)
         idx = np.empty(w, np.int32)
@@ -316,13 +318,12 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, offsets, occlusion, gains,
         vals = np.empty(w * n_ch, np.int32)
         for k in range(task, n_views, chunks):
             _warp_view(packed, channels, ch0, n_ch, disp, offsets, k // n_v, k % n_v, occlusion, gains, g_rows,
-                       g_row_w, g_cols, g_col_w, dview, d_row, src_x, cols, targets, idx, fxs, fys, gcols, vals,
-                       out)
+                       g_row_w, g_cols, g_col_w, dview, d_row, cols, targets, idx, fxs, fys, gcols, vals, out)
 
 
 @numba.njit(**_ROW)
 def _warp_view(packed, channels, ch0, n_ch, disp, offsets, u, v, occlusion, gains, g_rows, g_row_w, g_cols, g_col_w,
-               dview, d_row, src_x, cols, targets, idx, fxs, fys, gcols, vals, out):  # pragma: no cover - compiled
+               dview, d_row, cols, targets, idx, fxs, fys, gcols, vals, out):  # pragma: no cover - compiled
     """One view of :func:`warp_all_views`, in the caller's scratch buffers."""
     h, w = disp.shape
     has_gains = gains.shape[0] > 0
@@ -347,8 +348,8 @@ def _warp_view(packed, channels, ch0, n_ch, disp, offsets, u, v, occlusion, gain
     for y in range(h):
         row = dview[y] if splatted else disp[y]
         if splatted and np.min(row) <= _HOLE_TEST:  # a disoccluded run in this row: fill it
-            _row_disparity(disp[y], row, cols, src_x, d_row)
-            _row_taps(d_row, src_x, y, du, dv, h, idx, fxs, fys)
+            _row_disparity(disp[y], row, d_row)
+            _row_taps(d_row, cols, y, du, dv, h, idx, fxs, fys)
         else:  # every pixel has its own disparity (most rows): no copy, no scan
             _row_taps(row, cols, y, du, dv, h, idx, fxs, fys)
         if has_gains and channels == 3:

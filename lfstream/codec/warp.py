@@ -7,8 +7,10 @@ are clamped to its border. A capture with its own view axes ``A``
 (:func:`lfstream.lightfield.view_offsets`) uses ``d * A @ (u - u0)`` in place of ``d * (u - u0)``.
 
 Occlusion: the per-view maps ``d(x, u)`` are the centre map forward-splatted into each view
-with a z-test (the nearer surface wins) and disoccluded holes filled from the background
-side, so a foreground edge neither smears into the background nor leaves a crack.
+with a z-test (the nearer surface wins); a pixel nothing landed on (a disocclusion, or a
+crack where a surface stretches) takes the disparity of its nearest splatted neighbour on
+the background side and is sampled at its own position, so a foreground edge neither
+smears into the background nor leaves a crack.
 """
 
 from __future__ import annotations

@@ -15,7 +15,8 @@ from lfstream.synth import synth_clip
 
 
 def _reference_maps(disp: np.ndarray, n_u: int, n_v: int, occlusion: bool, axes=None) -> np.ndarray:
-    """maps[u, v, y, x] = (x_src, y_src), written out in plain Python (the old kernel's rules)."""
+    """maps[u, v, y, x] = (x_src, y_src), written out in plain Python: z-tested forward splatting,
+    holes given the disparity of their background-side neighbour."""
     h, w = disp.shape
     maps = np.empty((n_u, n_v, h, w, 2), np.float32)
     offsets = view_offsets((n_u, n_v), axes)
@@ -51,7 +52,8 @@ def _reference_maps(disp: np.ndarray, n_u: int, n_v: int, occlusion: bool, axes=
                         src = right
                     else:
                         src = left
-                    maps[u, v, y, x] = (src + row[src] * dv, y + row[src] * du)
+                    # the background side's disparity, sampled from the hole pixel's own position
+                    maps[u, v, y, x] = (x + row[src] * dv, y + row[src] * du)
     return maps
 
 
