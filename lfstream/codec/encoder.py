@@ -150,7 +150,10 @@ class Encoder:
             hint = self._hints.encode(frame, seq, present)
         gain = b""
         if self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1 and not self.codes_views:
-            gains = measure_gains(frame, self.gain_grid, present=present)
+            sent = self._hints.last if hint else None  # the hint as the decoder will warp with it
+            gains = measure_gains(frame, self.gain_grid, present=present,
+                                  disparity=None if sent is None else sent.values(),
+                                  axes=None if sent is None else sent.axes)
             gain = self._gains.encode(gains if shading_present(gains) else None, seq)
         packet = Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
         if self.residual is not None and frame.shape[0] * frame.shape[1] > 1:

@@ -561,6 +561,11 @@ class HintTracker:
         self._search: tuple[float, float] = (0.0, 0.0)  # the key hint's sweep range
         self._axes: np.ndarray | None = None  # the capture's view axes, from the first frame
 
+    @property
+    def last(self) -> QuantisedHint | None:
+        """The last frame's hint as the decoder rebuilds it (``None`` before the first)."""
+        return self._prev
+
     def encode(self, lf: np.ndarray, seq: int, present: np.ndarray | None = None) -> bytes:
         """The hint payload of frame ``seq`` (frames must come in order for deltas)."""
         opts = self.options

@@ -6,7 +6,10 @@ centre's brightness into every view and misses that entirely. The encoder, which
 every view, measures each view's low-frequency gain against the centre view on a coarse
 grid (``grid x grid`` cells per view, per colour channel), and sends it as 8-bit
 log2-gains, zstd-compressed; the decoder multiplies each warped view by the upsampled gain.
-Cells this coarse are insensitive to parallax, so the gain captures shading, not content.
+With the depth hint, each view is sampled where the centre's samples appear in it (the
+hint's disparity), so a cell compares the same surfaces and the gain captures shading, not
+the content parallax moves between views (on a camera array's large disparities coarse
+cells alone did not suffice).
 
 Payload, a full map (version 1): ``u8 version, u8 grid_h, u8 grid_w, u8 channels, u8 U,
 u8 V`` + zstd(int8 values ``round(64 * log2(gain))``, shape ``(U, V, grid_h, grid_w,
@@ -39,9 +42,21 @@ GAIN_DEADBAND = 1
 _STEP = 64.0  # int8 units per octave: gains within 2**(+-127/64) ~ [0.25, 3.96], 1.1 % steps
 
 
-def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3, present: np.ndarray | None = None) -> np.ndarray:
+def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3, present: np.ndarray | None = None,
+                  disparity: np.ndarray | None = None, axes: np.ndarray | None = None) -> np.ndarray:
     """Gains ``(U, V, gh, gw, channels)`` of each view against the centre view, cell by cell;
-    views marked absent in ``present`` get gain 1."""
+    views marked absent in ``present`` get gain 1.
+
+    With ``disparity`` (the centre view's, at any resolution: the decoded hint map) each
+    view is sampled where the centre's samples appear in it (``x - d * (u - u0)``, view
+    ``axes`` as :func:`lfstream.lightfield.view_offsets`), so a cell compares the same
+    surfaces, not whatever parallax moved into it: on a camera array (toys_array, ~7.5 px
+    of disparity per view step) uncompensated cells measured content, and the "gains"
+    cost 0.49 dB MPSNR against sending none.
+
+    Shape:
+        - lf: ``(U, V, H, W, C)``; disparity: ``(h, w)`` px per view step
+    """
     if grid < 1 or channels not in (1, 3):
         raise LFValueError(f"gain grid >= 1 and channels 1 or 3, got {grid}, {channels}")
     x = np.asarray(lf)
@@ -49,14 +64,33 @@ def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3, present: np.
     # cells this coarse need no full-resolution pass: about 8 x 8 samples per cell are
     # plenty (shading is smooth) and keep the encoder's cost near a millisecond
     step = max(1, min(h, w) // (8 * grid))
-    sub = x[:, :, ::step, ::step]
-    gh = max(1, min(grid, sub.shape[2]))
-    gw = max(1, min(int(round(grid * w / max(h, 1))), sub.shape[3]))
+    ys, xs = np.arange(0, h, step), np.arange(0, w, step)
+    gh = max(1, min(grid, len(ys)))
+    gw = max(1, min(int(round(grid * w / max(h, 1))), len(xs)))
     scale = np.float32(1 / 255.0) if x.dtype == np.uint8 else np.float32(1.0)
+    if disparity is None:
+        samples = x[:, :, ::step, ::step]
+    else:
+        from lfstream.lightfield import view_offsets
+
+        d = np.asarray(disparity, np.float32)
+        # the map's value at each sample: nearest cell of the (coarser) map
+        dy = np.minimum((ys * d.shape[0]) // h, d.shape[0] - 1)
+        dx = np.minimum((xs * d.shape[1]) // w, d.shape[1] - 1)
+        d_samples = d[dy[:, None], dx[None, :]]
+        offsets = view_offsets((u, v), axes)[:, :, None, None, :]  # (U, V, 1, 1, 2)
+        # all views' sample positions in one pass (the centre view's are the samples themselves)
+        yf, xf = ys.astype(np.float32)[:, None], xs.astype(np.float32)[None, :]
+        sy = np.clip(np.rint(yf - d_samples * offsets[..., 0]), 0, h - 1).astype(np.intp)
+        sx = np.clip(np.rint(xf - d_samples * offsets[..., 1]), 0, w - 1).astype(np.intp)
+        # one flat gather (numpy's four-array fancy indexing took ~3 ms for 7x7 views)
+        view_base = (np.arange(u * v) * (h * w)).reshape(u, v, 1, 1)
+        samples = np.ascontiguousarray(x).reshape(-1, c).take((view_base + sy * w + sx).ravel(), axis=0)
+        samples = samples.reshape(u, v, len(ys), len(xs), c)
     cells = np.empty((u, v, gh, gw, c), np.float32)
     for a in range(u):
         for b in range(v):
-            view = sub[a, b].astype(np.float32) * scale
+            view = samples[a, b].astype(np.float32) * scale
             cells[a, b] = cv2.resize(view, (gw, gh), interpolation=cv2.INTER_AREA).reshape(gh, gw, c)
     if channels == 1:
         cells = cells.mean(-1, keepdims=True)

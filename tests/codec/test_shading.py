@@ -139,3 +139,21 @@ def test_mutated_payloads_decode_or_raise_bitstream_errors(shaded_gains):
         assert np.isfinite(g).all() and (g > 0).all()
         outcomes["decoded"] += 1
     assert outcomes["rejected"] > 100 and outcomes["decoded"] + outcomes["rejected"] == 300
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_parallax_compensated_cells_measure_shading_not_content(seed):
+    # a scene with no shading and large disparities (+-4 px per view step, 5x5 views): every
+    # true gain is 1, so what a cell measures beyond that is content moved by parallax
+    clip = synth_clip(1, 5, (120, 160), seed=seed, layers=3, motion=0, camera_pan=0, disparity_range=(-4.0, 4.0),
+                      vignetting=0.0, noise=0.0)
+    lf, d = clip.lf[0], clip.disparity[0, 2, 2].astype(np.float32)
+    plain = np.abs(np.log2(measure_gains(lf, 4)))
+    compensated = np.abs(np.log2(measure_gains(lf, 4, disparity=d)))
+    # measured: p90 0.100 -> 0.034, 0.060 -> 0.038, 0.110 -> 0.048 (log2 units)
+    assert np.percentile(compensated, 90) < 0.06
+    assert np.percentile(compensated, 90) < np.percentile(plain, 90) / 1.4
+    # the centre view's cells are its own: gain 1 exactly, with or without the disparity
+    np.testing.assert_array_equal(compensated[2, 2], 0.0)
+    # a zero disparity samples what the plain measurement samples
+    np.testing.assert_array_equal(measure_gains(lf, 4, disparity=np.zeros((30, 40), np.float32)), measure_gains(lf, 4))
