@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 import lfstream
 from lfstream.codec.warp import warp_views
 from lfstream.errors import LFStreamError
+from lfstream.lightfield import view_offsets
 from lfstream.metrics import mpsnr, mssim, psnr, ssim
 from lfstream.models.registry import load_model
 from lfstream.refocus import focal_stack
@@ -103,7 +104,8 @@ def test_encode_is_deterministic_and_decode_finite(seed, quality):
 def test_networks_finite_on_constant_images_in_train_and_eval(name):
     model = load_model(name)
     x = {"jpeg_hance": (torch.full((2, 3, 24, 24), 0.5),),
-         "depth_net": (torch.full((2, 3, 24, 24), 0.5), torch.zeros(2, 1, 24, 24)),
+         "depth_net": (torch.full((2, 3, 24, 24), 0.5), torch.zeros(2, 1, 24, 24), torch.zeros(2, 7, 7, 24, 24),
+                       torch.from_numpy(view_offsets((7, 7)))),
          "refnet": (torch.full((2, 7, 7, 3, 24, 24), 0.5),)}[name]
     for mode in (model.eval, model.train):
         mode()

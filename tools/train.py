@@ -71,9 +71,12 @@ class Recipe:
 
 
 DEFAULT_STEPS = {"jpeg_hance": 3000, "depth_net": 3000, "refnet": 3000}
-#: Real scenes a post-filter JPEG-Hance trains on (one Lytro capture, one HCI render, the
-#: camera array); seahorse, cotton and lytro_translucent stay out: its held-out test.
-HANCE_TRAIN_SCENES = ("lytro_bikes", "dino", "toys_array")
+#: Real scenes the hint refiner (Depth-Net fast) trains on: the same split as JPEG-Hance.
+DEPTH_TRAIN_SCENES = HANCE_TRAIN_SCENES = ("lytro_bikes", "dino", "toys_array")
+#: JPEG qualities it trains at.
+DEPTH_QUALITIES = (30, 50, 70)
+#: (the same three for a post-filter JPEG-Hance: one Lytro capture, one HCI render, the
+#: camera array; seahorse, cotton and lytro_translucent stay out: the held-out test)
 #: JPEG qualities it trains at: around the default (50) and where rate control goes.
 HANCE_QUALITIES = (30, 40, 50, 60, 70)
 DEFAULT_BATCH = {"jpeg_hance": 32, "depth_net": 8, "refnet": 8}
@@ -177,6 +180,137 @@ def augment(batch: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def _to_tensor(img: np.ndarray, device) -> torch.Tensor:
     """``(..., H, W, 3)`` uint8 to ``(..., 3, H, W)`` float32 in [0, 1]."""
     return to_network_input(img, device)
+
+
+@dataclass
+class DepthSample:
+    """One decoded frame of a real scene with what the refiner sees and what it is judged on."""
+
+    name: str
+    centre: np.ndarray  # (H, W, 3) uint8, decoded and post-filtered as the decoder does
+    hint: np.ndarray  # (H, W) float32, the decoded hint
+    view_maps: np.ndarray  # (U, V, H, W) float32, the warp's per-view maps of the hint
+    offsets: np.ndarray  # (U, V, 2) float32
+    gains: np.ndarray  # (U, V, H, W, 1 or 3) float32, full resolution (ones: none)
+    truth: np.ndarray  # (U, V, H, W, 3) uint8
+    present: np.ndarray  # (U, V) bool
+
+
+def decoded_parts(lf: np.ndarray, present: np.ndarray | None, quality: int, hint_scale: int):
+    """The default encode of one frame at ``quality`` with the hint at ``1 / hint_scale``,
+    decoded: the :class:`lfstream.codec.decoder.DecodedFrame` with centre, hint, axes, gains."""
+    import io
+
+    import lfstream
+    from lfstream.codec.bitstream import iter_packets, read_header
+    from lfstream.codec.decoder import Decoder
+    from lfstream.codec.hint import HintOptions
+
+    data = lfstream.encode(lf, quality=quality, present=present, hint_options=HintOptions(hint_scale=hint_scale))
+    fh = io.BytesIO(data)
+    header = read_header(fh)
+    return Decoder(header, hance="off").decode_packet(next(iter(iter_packets(fh, header))))
+
+
+def real_depth_samples(scenes: tuple[str, ...], qualities: tuple[int, ...],
+                       hint_scales: tuple[int, ...] = (4, 8)) -> list[DepthSample]:
+    """Every scene at every quality and hint resolution, decoded (:func:`decoded_parts`)."""
+    import cv2
+
+    from lfstream.codec.warp import view_disparities
+    from lfstream.io import read_lf
+    from lfstream.lightfield import view_offsets
+
+    out = []
+    for name in scenes:
+        lf, present = read_lf(SHARED / SHARED_SCENES[name], return_mask=True)
+        u, v, h, w, _ = lf.shape
+        for q in qualities:
+            for scale in hint_scales:
+                fr = decoded_parts(lf, None if present.all() else present, q, scale)
+                gains = np.ones((u, v, h, w, 1), np.float32)
+                if fr.gains is not None:
+                    gains = np.stack([np.stack([cv2.resize(fr.gains[a, b], (w, h), interpolation=cv2.INTER_LINEAR)
+                                                .reshape(h, w, -1) for b in range(v)]) for a in range(u)])
+                out.append(DepthSample(f"{name} q{q} 1/{scale}", fr.centre, fr.disparity.astype(np.float32),
+                                       view_disparities(fr.disparity, (u, v), axes=fr.axes),
+                                       view_offsets((u, v), fr.axes), gains.astype(np.float32), lf, present))
+    return out
+
+
+def refiner_batch_loss(model, sample: DepthSample, recipe: Recipe, rng: np.random.Generator, device,
+                       zero: bool = False) -> tuple[torch.Tensor, dict]:
+    """Photometric loss of the views the refined maps synthesise: ``recipe.batch`` crops of
+    ``sample``, ``recipe.views`` random present views each (the centre excluded), bilinear
+    sampling of the whole centre view (no crop border), the shading gains multiplied in;
+    MSE. ``zero``: the same with the corrections at zero (the hint)."""
+    from lfstream.models.warp import sample_bilinear
+
+    c = recipe.crop
+    h, w = sample.hint.shape
+    u_n, v_n = sample.present.shape
+    cand = [(a, b) for a, b in zip(*np.nonzero(sample.present)) if (a, b) != (u_n // 2, v_n // 2)]
+    ys = rng.integers(0, h - c + 1, recipe.batch)
+    xs = rng.integers(0, w - c + 1, recipe.batch)
+    centre_full = _to_tensor(sample.centre, device)[None]
+    crops = torch.stack([centre_full[0, :, y:y + c, x:x + c] for y, x in zip(ys, xs)])
+    hints = torch.stack([torch.from_numpy(sample.hint[y:y + c, x:x + c]) for y, x in zip(ys, xs)])[:, None].to(device)
+    corr = model.corrections(crops, hints)
+    if zero:
+        corr = corr * 0
+    gy, gx = torch.meshgrid(torch.arange(c, device=device, dtype=torch.float32),
+                            torch.arange(c, device=device, dtype=torch.float32), indexing="ij")
+    sy_all, sx_all, targets, gains = [], [], [], []
+    for k, (y, x) in enumerate(zip(ys, xs)):
+        for i in rng.choice(len(cand), min(recipe.views, len(cand)), replace=False):
+            a, b = cand[i]
+            oy, ox = sample.offsets[a, b]
+            d = torch.from_numpy(sample.view_maps[a, b, y:y + c, x:x + c]).to(device)
+            d = d + corr[k, 0] + float(oy) * corr[k, 1] + float(ox) * corr[k, 2]
+            sy_all.append(gy + int(y) + d * float(oy))
+            sx_all.append(gx + int(x) + d * float(ox))
+            targets.append(sample.truth[a, b, y:y + c, x:x + c])
+            gains.append(sample.gains[a, b, y:y + c, x:x + c])
+    n = len(sy_all)
+    # one sampling call on the un-replicated centre view: the n crops stacked along y
+    warped = sample_bilinear(centre_full, torch.cat(sy_all)[None], torch.cat(sx_all)[None])
+    warped = warped.reshape(3, n, c, c).transpose(0, 1)
+    warped = warped * torch.from_numpy(np.stack(gains)).permute(0, 3, 1, 2).to(device)
+    target = _to_tensor(np.stack(targets), device)
+    # MSE alone: an SSIM term (11x11 Gaussian moments of every crop) tripled the step time
+    return torch.mean((warped - target) ** 2), {}
+
+
+def train_depth_refiner(recipe: Recipe, out: Path, device: str, resume: bool, checkpoint_every: int
+                        ) -> tuple[torch.nn.Module, dict]:
+    """The hint refiner (Depth-Net fast) on real scenes, unsupervised: decoded frames of
+    ``recipe.scenes`` at ``recipe.qualities`` with the hint at 1/4 and 1/8 resolution
+    (:func:`real_depth_samples`), photometric loss (:func:`refiner_batch_loss`). Logged
+    every 50 steps: the loss against the same batch with the corrections at zero."""
+    t0 = time.perf_counter()
+    samples = real_depth_samples(recipe.scenes, recipe.qualities)
+    print(f"{recipe.model}: {len(samples)} decoded frames of {', '.join(recipe.scenes)} "
+          f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    model = spec(recipe.model, recipe.preset).build().to(device)
+    run = Run(out, recipe, model, resume)
+    rng = np.random.default_rng(recipe.seed + run.step)
+
+    def batch_loss() -> tuple[torch.Tensor, dict]:
+        sample = samples[int(rng.integers(len(samples)))]
+        state = rng.bit_generator.state
+        loss, terms = refiner_batch_loss(model, sample, recipe, rng, device)
+        if run.step % 50 == 49:  # the same crops and views with the corrections at zero
+            probe = np.random.default_rng()
+            probe.bit_generator.state = state
+            with torch.no_grad():
+                base, _ = refiner_batch_loss(model, sample, recipe, probe, device, zero=True)
+            terms["hint_loss"] = float(base)
+        return loss, terms
+
+    t0 = time.perf_counter()
+    run_steps(run, batch_loss, checkpoint_every)
+    model.eval()
+    return finish_run(run, {}, t0, device)
 
 
 # ---------------------------------------------------------------------------------------
@@ -314,6 +448,8 @@ def train(recipe: Recipe, out: Path, device: str, resume: bool, workers: int, ch
     torch.manual_seed(recipe.seed)
     rng = np.random.default_rng(recipe.seed)
     t0 = time.perf_counter()
+    if recipe.data == "real" and recipe.model == "depth_net":
+        return train_depth_refiner(recipe, out, device, resume, checkpoint_every)
     if recipe.data == "real":
         return train_real_hance(recipe, out, device, resume, checkpoint_every)
     data, hints = render_dataset(recipe.samples, recipe.views, recipe.size, recipe.seed, workers)
@@ -450,7 +586,10 @@ def main(argv: list[str] | None = None) -> int:
         if name == "jpeg_hance" and spec(name, args.preset).config.after_deblock:
             recipe = replace(recipe, data="real", scenes=HANCE_TRAIN_SCENES, qualities=HANCE_QUALITIES,
                              steps=args.steps or 4000, batch=args.batch or 16)
-        if name == "depth_net" and hance is None:
+        if name == "depth_net" and args.preset == "fast":  # the hint refiner, on real scenes
+            recipe = replace(recipe, data="real", scenes=DEPTH_TRAIN_SCENES, qualities=DEPTH_QUALITIES,
+                             steps=args.steps or 3000, batch=args.batch or 8, crop=128, views=8, samples=0)
+        elif name == "depth_net" and hance is None:
             try:
                 hance = load_model("jpeg_hance", args.preset, device=args.device)
             except Exception as exc:

@@ -271,8 +271,8 @@ def _row_sample3_gain(packed, stride, idx, fxs, fys, top, bottom, wa, vals, dst)
 
 
 @numba.njit(**_PARALLEL)
-def warp_all_views(packed, channels, ch0, n_ch, disp, offsets, occlusion, gains, g_rows, g_row_w, g_cols,
-                   g_col_w, chunks, out):  # pragma: no cover - compiled
+def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, occlusion, gains, g_rows, g_row_w,
+                   g_cols, g_col_w, chunks, out):  # pragma: no cover - compiled
     """Every view of a light field from its centre view and disparity, in one parallel pass.
 
     View (u, v) pixel (y, x) samples the centre at ``(y + d * du, x + d * dv)``, ``(du, dv) =
@@ -287,6 +287,8 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, offsets, occlusion, gains,
             ch0 .. ch0 + n_ch - 1 in lanes (:func:`pack_lanes`).
         channels: C of the output; ch0, n_ch: the channels this call writes (n_ch <= 3).
         disp: (H, W) float32 centre-view disparity.
+        view_disp: (U, V, H, W) float32 per-view disparities (Depth-Net's maps), used in
+            place of splatting ``disp``; shape (0, 0, 1, 1): none.
         offsets: (U, V, 2) float32 displacement of each view per unit disparity.
         gains: (U, V, gh, gw, Cg) float32 gain maps (Cg = 1 or C), or shape (0, 0, 1, 1, 1): none.
         g_rows, g_row_w: (H, 2) int64 grid rows per image row and the weight of the first.
@@ -313,21 +315,22 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, offsets, occlusion, gains,
         gcols = np.ones((gh, w * n_ch), np.float32)
         vals = np.empty(w * n_ch, np.int32)
         for k in range(task, n_views, chunks):
-            _warp_view(packed, channels, ch0, n_ch, disp, offsets, k // n_v, k % n_v, occlusion, gains, g_rows,
-                       g_row_w, g_cols, g_col_w, dview, cols, targets, idx, fxs, fys, gcols, vals, out)
+            _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, k // n_v, k % n_v, occlusion, gains,
+                       g_rows, g_row_w, g_cols, g_col_w, dview, cols, targets, idx, fxs, fys, gcols, vals, out)
 
 
 @numba.njit(**_ROW)
-def _warp_view(packed, channels, ch0, n_ch, disp, offsets, u, v, occlusion, gains, g_rows, g_row_w, g_cols, g_col_w,
-               dview, cols, targets, idx, fxs, fys, gcols, vals, out):  # pragma: no cover - compiled
+def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, occlusion, gains, g_rows, g_row_w,
+               g_cols, g_col_w, dview, cols, targets, idx, fxs, fys, gcols, vals, out):  # pragma: no cover
     """One view of :func:`warp_all_views`, in the caller's scratch buffers."""
     h, w = disp.shape
     has_gains = gains.shape[0] > 0
+    per_view = view_disp.shape[0] > 0
     cg = gains.shape[4]
     du = offsets[u, v, 0]
     dv = offsets[u, v, 1]
     stride = np.uint32(w + 2)  # a row of the padded centre view
-    splatted = occlusion and not (du == 0 and dv == 0)
+    splatted = occlusion and not (du == 0 and dv == 0) and not per_view
     if splatted:
         _splat_view(disp, cols, du, dv, dview, targets)
     # the gain map up-sampled along x once per view (gh rows); each image row then
@@ -342,7 +345,9 @@ def _warp_view(packed, channels, ch0, n_ch, disp, offsets, u, v, occlusion, gain
                     cc = ch0 + j if cg > 1 else 0
                     gcols[r, x * n_ch + j] = (gains[u, v, r, ca, cc] * wx + gains[u, v, r, cb, cc] * (1 - wx)) * scale
     for y in range(h):
-        if splatted:
+        if per_view:
+            _row_taps(view_disp[u, v, y], cols, y, du, dv, h, idx, fxs, fys)
+        elif splatted:
             row = dview[y]
             if np.min(row) <= _HOLE_TEST:  # a hole in this row (the splat's scratch): fill it
                 _fill_holes(disp[y], row)
@@ -359,6 +364,37 @@ def _warp_view(packed, channels, ch0, n_ch, disp, offsets, u, v, occlusion, gain
             _row_sample3(packed, stride, idx, fxs, fys, out[u, v, y])
         else:
             _row_sample(packed, stride, idx, fxs, fys, channels, ch0, n_ch, out[u, v, y])
+
+
+@numba.njit(**_PARALLEL)
+def splat_all_views(disp, offsets, occlusion, out):  # pragma: no cover - compiled
+    """The per-view disparities :func:`warp_all_views` samples with: ``disp`` forward-splatted
+    into each view and its holes filled (``occlusion``), or ``disp`` itself; warping with
+    these as ``view_disp`` gives the same views, bit for bit.
+
+    Args:
+        disp: (H, W) float32 centre-view disparity.
+        offsets: (U, V, 2) float32 displacement of each view per unit disparity.
+        out: (U, V, H, W) float32, overwritten.
+    """
+    h, w = disp.shape
+    n_v = offsets.shape[1]
+    n_views = offsets.shape[0] * n_v
+    for k in numba.prange(n_views):
+        u, v = k // n_v, k % n_v
+        du = offsets[u, v, 0]
+        dv = offsets[u, v, 1]
+        dview = out[u, v]
+        if not occlusion or (du == 0 and dv == 0):
+            dview[:] = disp
+            continue
+        cols = np.arange(w).astype(np.float32)
+        targets = np.empty(w, np.int32)
+        _splat_view(disp, cols, du, dv, dview, targets)
+        for y in range(h):
+            row = dview[y]
+            if np.min(row) <= _HOLE_TEST:
+                _fill_holes(disp[y], row)
 
 
 # RGB -> grey as OpenCV's 8-bit COLOR_RGB2GRAY computes it (BT.601 weights in 15-bit fixed

@@ -24,7 +24,7 @@ from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
 from lfstream.codec.jpeg import deblock_jpeg, jpeg_quality_scale
 from lfstream.codec.residual import VIEW_MODES, apply_residual, residual_mode
-from lfstream.codec.shading import GainDecoder, GainReferenceError, apply_gains
+from lfstream.codec.shading import GainDecoder, GainReferenceError
 from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.errors import BitstreamError, LFFileError, LFValueError
 
@@ -55,6 +55,7 @@ class DecodedFrame:
     centre: np.ndarray  # (H, W, 3) uint8, the decoded centre view
     disparity: np.ndarray  # (H, W) float32 centre-view disparity the warp used
     axes: np.ndarray | None = None  # (2, 2) view axes the disparity moves along; None: the convention
+    gains: np.ndarray | None = None  # (U, V, gh, gw, 1 or 3) shading gains the views carry; None: none
 
 
 @dataclass
@@ -228,16 +229,9 @@ class Decoder:
             lf[u // 2, v // 2] = centre
             return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes)
         # the warp kernel multiplies the gains in as it samples (no second pass over the views)
-        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion, gains=self._gains(packet),
-                        axes=axes)
-        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes)
-
-    def _finish(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray, lf: np.ndarray,
-                axes: np.ndarray | None) -> DecodedFrame:
         gains = self._gains(packet)
-        if gains is not None:
-            lf = apply_gains(lf, gains)
-        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes)
+        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion, gains=gains, axes=axes)
+        return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes, gains)
 
     def decode_batch(self, packets: list[Packet], centres: np.ndarray | None = None) -> list[DecodedFrame]:
         """Decodes several packets; the networks run once over the batch. ``centres``: the
@@ -263,10 +257,14 @@ class Decoder:
         from lfstream.models.depth_net import predict_view_disparities
 
         stacked = np.stack(hints) if self._depth_net.config.hint else None
-        view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device)
+        view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device, axes)
         u0, v0 = self.header.views[0] // 2, self.header.views[1] // 2
-        return [self._finish(p, centre, maps[u0, v0], warp_views_per_view(centre, maps, a), a)
-                for p, centre, maps, a in zip(packets, centres, view_maps, axes)]
+        frames = []
+        for p, centre, maps, a in zip(packets, centres, view_maps, axes):
+            gains = self._gains(p)
+            frames.append(DecodedFrame(p.seq, p.timestamp_us, warp_views_per_view(centre, maps, a, gains), centre,
+                                       maps[u0, v0], a, gains))
+        return frames
 
 
 def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),

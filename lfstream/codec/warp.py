@@ -72,12 +72,7 @@ def warp_views(
     check_finite(d, "disparity")
     offsets = view_offsets((u, v), axes)
     src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
-    if gains is not None:
-        gains = np.ascontiguousarray(gains, np.float32)
-        if gains.ndim != 5 or gains.shape[:2] != (u, v) or gains.shape[4] not in (1, c):
-            raise LFShapeError(f"gains: expected ({u}, {v}, gh, gw, 1 or {c}), got {gains.shape}")
-        if np.all(np.abs(gains - 1.0) < 1e-6):
-            gains = None
+    gains = _check_gains(gains, (u, v), c)
     if not np.any(d):  # every view is the centre view: copies, then OpenCV's gain multiply
         flat = np.ascontiguousarray(np.broadcast_to(src, (u, v, h, w, c)))
         if gains is None:
@@ -85,10 +80,30 @@ def warp_views(
         from lfstream.codec.shading import apply_gains
 
         return apply_gains(flat, gains)
+    return _warp_kernel(src, np.ascontiguousarray(d), None, offsets, occlusion, gains)
+
+
+def _check_gains(gains: np.ndarray | None, views: tuple[int, int], c: int) -> np.ndarray | None:
+    """The gain maps as float32, or ``None`` where there are none or all are 1."""
+    if gains is None:
+        return None
+    u, v = views
+    gains = np.ascontiguousarray(gains, np.float32)
+    if gains.ndim != 5 or gains.shape[:2] != (u, v) or gains.shape[4] not in (1, c):
+        raise LFShapeError(f"gains: expected ({u}, {v}, gh, gw, 1 or {c}), got {gains.shape}")
+    return None if np.all(np.abs(gains - 1.0) < 1e-6) else gains
+
+
+def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, offsets: np.ndarray,
+                 occlusion: bool, gains: np.ndarray | None) -> np.ndarray:
+    """Runs the fused warp (:func:`lfstream.codec._kernels.warp_all_views`) over every
+    channel triple of ``src`` (H, W, C) uint8."""
     import numba
 
     from lfstream.codec._kernels import _LANES, pack_lanes, warp_all_views
 
+    h, w, c = src.shape
+    u, v = offsets.shape[:2]
     if gains is None:
         gains = np.ones((0, 0, 1, 1, 1), np.float32)
         rows, row_w = np.zeros((h, 2), np.int64), np.ones(h, np.float32)
@@ -96,55 +111,76 @@ def warp_views(
     else:
         rows, row_w = _linear_taps(h, gains.shape[2])
         cols, col_w = _linear_taps(w, gains.shape[3])
+    if view_disp is None:
+        view_disp = np.zeros((0, 0, 1, 1), np.float32)
     out = np.empty((u, v, h, w * c), np.uint8)
-    d = np.ascontiguousarray(d)
     packed = np.empty((h + 2) * (w + 2), np.uint64)  # with a one-pixel border (pack_lanes)
     for ch0 in range(0, c, _LANES):  # three channels per pass, in the lanes of one uint64
         n_ch = min(_LANES, c - ch0)
         pack_lanes(src, ch0, n_ch, packed)
-        warp_all_views(packed, c, ch0, n_ch, d, offsets, bool(occlusion), gains, rows, row_w, cols, col_w,
-                       numba.get_num_threads(), out)
+        warp_all_views(packed, c, ch0, n_ch, d, view_disp, offsets, bool(occlusion), gains, rows, row_w, cols,
+                       col_w, numba.get_num_threads(), out)
     return out.reshape(u, v, h, w, c)
 
 
-def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray, axes: np.ndarray | None = None) -> np.ndarray:
+def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: bool = True,
+                     axes: np.ndarray | None = None) -> np.ndarray:
+    """The per-view disparity maps :func:`warp_views` samples each view with: the centre map
+    forward-splatted into the view, holes filled from the background side (see the module
+    docstring), or the centre map itself without ``occlusion``. ``warp_views_per_view`` with
+    these maps gives exactly ``warp_views``'s light field; Depth-Net refines them.
+
+    Args:
+        disparity: ``(H, W)`` centre-view disparity in pixels per view step.
+        views: ``(U, V)``.
+        occlusion: splat with a z-test (as :func:`warp_views`).
+        axes: ``(2, 2)`` view axes of the capture; ``None``: the convention.
+
+    Shape:
+        - output: ``(U, V, H, W)`` float32
+    """
+    d = np.ascontiguousarray(disparity, np.float32)
+    if d.ndim != 2:
+        raise LFShapeError(f"disparity: expected (H, W), got shape {tuple(d.shape)}")
+    u, v = views
+    if not (1 <= u <= MAX_VIEWS_PER_AXIS and 1 <= v <= MAX_VIEWS_PER_AXIS):
+        raise LFValueError(f"views: each in 1..{MAX_VIEWS_PER_AXIS}, got {views}")
+    check_finite(d, "disparity")
+    from lfstream.codec._kernels import splat_all_views
+
+    out = np.empty((u, v, *d.shape), np.float32)
+    splat_all_views(d, view_offsets((u, v), axes), bool(occlusion), out)
+    return out
+
+
+def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray, axes: np.ndarray | None = None,
+                        gains: np.ndarray | None = None) -> np.ndarray:
     """``L(x, u) = C(x + (u - u0) d(x, u))`` with one disparity map per view (Depth-Net's
-    output, seed Fig. 3.2): one OpenCV bilinear remap per view, border clamped.
+    output, seed Fig. 3.2), in the same fused kernel as :func:`warp_views` (bilinear in
+    1/1024-pixel fixed point, border replicated, gains multiplied in).
 
     Args:
         centre: ``(H, W, C)`` uint8 or float in ``[0, 1]``.
         disparities: ``(U, V, H, W)`` px per view step.
         axes: ``(2, 2)`` view axes (:func:`lfstream.lightfield.view_offsets`); ``None``: the
             convention.
+        gains: ``(U, V, gh, gw, 1 or C)`` per-view gain maps, or ``None``.
 
     Shape:
         - output: ``(U, V, H, W, C)`` uint8
     """
-    import cv2
-
     if centre.ndim != 3 or disparities.ndim != 4 or disparities.shape[2:] != centre.shape[:2]:
         raise LFShapeError(f"centre (H, W, C) and disparities (U, V, H, W) must agree; got {tuple(centre.shape)} "
                            f"and {tuple(disparities.shape)}")
-    check_finite(disparities, "disparities")
-    u_n, v_n, h, w = disparities.shape
-    c = centre.shape[2]
+    u, v = disparities.shape[:2]
+    if not (1 <= u <= MAX_VIEWS_PER_AXIS and 1 <= v <= MAX_VIEWS_PER_AXIS):
+        raise LFValueError(f"disparities: each view axis in 1..{MAX_VIEWS_PER_AXIS}, got {(u, v)}")
+    maps = np.ascontiguousarray(disparities, np.float32)
+    check_finite(maps, "disparities")
     src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
-    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
-    offsets = view_offsets((u_n, v_n), axes)
-    out = np.empty((u_n, v_n, h, w, c), np.uint8)
-    mx = np.empty((h, w), np.float32)
-    my = np.empty((h, w), np.float32)
-    for a in range(u_n):
-        for b in range(v_n):
-            d = disparities[a, b].astype(np.float32, copy=False)
-            np.multiply(d, offsets[a, b, 1], out=mx)
-            mx += xs
-            np.multiply(d, offsets[a, b, 0], out=my)
-            my += ys
-            dst = out[a, b] if c > 1 else out[a, b, :, :, 0]
-            cv2.remap(src if c > 1 else src[:, :, 0], mx, my, cv2.INTER_LINEAR, dst=dst,
-                      borderMode=cv2.BORDER_REPLICATE)
-    return out
+    gains = _check_gains(gains, (u, v), src.shape[2])
+    return _warp_kernel(src, np.ascontiguousarray(maps[u // 2, v // 2]), maps, view_offsets((u, v), axes), False,
+                        gains)
 
 
-__all__ = ["warp_views", "warp_views_per_view"]
+__all__ = ["view_disparities", "warp_views", "warp_views_per_view"]

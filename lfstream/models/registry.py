@@ -55,14 +55,16 @@ def register(spec: ModelSpec) -> None:
 
 
 def _register_builtin() -> None:
-    from lfstream.models.depth_net import DEPTH_PRESETS, DepthNet, DepthNetConfig
+    from lfstream.models.depth_net import DEPTH_PRESETS, DepthNet, DepthNetConfig, DepthRefiner, DepthRefinerConfig
     from lfstream.models.jpeg_hance import HANCE_PRESETS, HanceConfig, JPEGHance
     from lfstream.models.refnet import REFNET_PRESETS, RefNet, RefNetConfig
 
     for preset in PRESETS:
         register(ModelSpec("jpeg_hance", preset, JPEGHance, HanceConfig, HANCE_PRESETS[preset]))
-        register(ModelSpec("depth_net", preset, DepthNet, DepthNetConfig, DEPTH_PRESETS[preset]))
         register(ModelSpec("refnet", preset, RefNet, RefNetConfig, REFNET_PRESETS[preset]))
+    # Depth-Net: the seed's monocular network (paper) and the hint refiner (fast)
+    register(ModelSpec("depth_net", "paper", DepthNet, DepthNetConfig, DEPTH_PRESETS["paper"]))
+    register(ModelSpec("depth_net", "fast", DepthRefiner, DepthRefinerConfig, DepthRefinerConfig()))
 
 
 _register_builtin()
