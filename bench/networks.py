@@ -95,6 +95,14 @@ def bench_hance(device: str, runs: int, quick: bool) -> list[dict]:
     return rows
 
 
+def decoded_quality(data: bytes, ref: np.ndarray, mask: np.ndarray | None, **decode_options) -> tuple[float, float]:
+    """MPSNR (capped) and MSSIM of the first frame of ``data`` decoded with
+    ``decode_options``, over the views ``mask`` marks present (``ref``: those views)."""
+    rec = decode(data, **decode_options)[0]
+    rec = rec if mask is None else rec[mask][:, None]
+    return capped(mpsnr(ref, rec)), float(mssim(ref, rec))
+
+
 def hance_lf_rows(device: str, quick: bool) -> list[dict]:
     """What the issue judges: the default encode of each real LF decoded with JPEG-Hance fast
     (``hance="on"``) against without it (``"off"``: the post-filter), MPSNR and MSSIM over
@@ -109,9 +117,7 @@ def hance_lf_rows(device: str, quick: bool) -> list[dict]:
         row = {"model": "jpeg_hance", "preset": "fast", "lf": name, "held_out": name not in seen,
                "decoded_lf": "default encode"}
         for mode in ("off", "on"):
-            rec = decode(data, hance=mode, device=device)[0]
-            rec = rec if mask is None else rec[mask][:, None]
-            row[f"{mode}_mpsnr"], row[f"{mode}_mssim"] = capped(mpsnr(ref, rec)), float(mssim(ref, rec))
+            row[f"{mode}_mpsnr"], row[f"{mode}_mssim"] = decoded_quality(data, ref, mask, hance=mode, device=device)
         rows.append(row)
         print(f"JPEG-Hance fast LF {name + ('' if row['held_out'] else ' (train)'):26s} default encode: "
               f"MPSNR {row['off_mpsnr']:.2f} -> {row['on_mpsnr']:.2f} dB ({row['on_mpsnr'] - row['off_mpsnr']:+.2f}), "
@@ -143,9 +149,8 @@ def bench_depth(device: str, runs: int, quick: bool) -> list[dict]:
             row = {"model": "depth_net", "preset": "fast", "lf": name, "held_out": name not in seen,
                    "hint_scale": scale, "bytes": len(data), "hint_bytes": hint_bytes}
             for mode in ("hint", "net"):
-                rec = decode(data, depth=mode, hance="off", device=device)[0]
-                rec = rec if mask is None else rec[mask][:, None]
-                row[f"{mode}_mpsnr"], row[f"{mode}_mssim"] = capped(mpsnr(ref, rec)), float(mssim(ref, rec))
+                row[f"{mode}_mpsnr"], row[f"{mode}_mssim"] = decoded_quality(data, ref, mask, depth=mode, hance="off",
+                                                                             device=device)
             rows.append(row)
             print(f"Depth-Net fast {name + ('' if row['held_out'] else ' (train)'):26s} hint 1/{scale} "
                   f"({hint_bytes:5d} of {len(data):6d} B): hint {row['hint_mpsnr']:.3f}/{row['hint_mssim']:.4f}  "

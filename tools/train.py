@@ -202,21 +202,17 @@ def decoded_parts(lf: np.ndarray, present: np.ndarray | None, quality: int, hint
     import io
 
     import lfstream
-    from lfstream.codec.bitstream import iter_packets, read_header
-    from lfstream.codec.decoder import Decoder
+    from lfstream.codec.decoder import iter_decode
     from lfstream.codec.hint import HintOptions
 
     data = lfstream.encode(lf, quality=quality, present=present, hint_options=HintOptions(hint_scale=hint_scale))
-    fh = io.BytesIO(data)
-    header = read_header(fh)
-    return Decoder(header, hance="off").decode_packet(next(iter(iter_packets(fh, header))))
+    return next(iter_decode(io.BytesIO(data), hance="off"))
 
 
 def real_depth_samples(scenes: tuple[str, ...], qualities: tuple[int, ...],
                        hint_scales: tuple[int, ...] = (4, 8)) -> list[DepthSample]:
     """Every scene at every quality and hint resolution, decoded (:func:`decoded_parts`)."""
-    import cv2
-
+    from lfstream.codec.shading import upsample_gain
     from lfstream.codec.warp import view_disparities
     from lfstream.io import read_lf
     from lfstream.lightfield import view_offsets
@@ -230,11 +226,11 @@ def real_depth_samples(scenes: tuple[str, ...], qualities: tuple[int, ...],
                 fr = decoded_parts(lf, None if present.all() else present, q, scale)
                 gains = np.ones((u, v, h, w, 1), np.float32)
                 if fr.gains is not None:
-                    gains = np.stack([np.stack([cv2.resize(fr.gains[a, b], (w, h), interpolation=cv2.INTER_LINEAR)
-                                                .reshape(h, w, -1) for b in range(v)]) for a in range(u)])
+                    gains = np.stack([np.stack([upsample_gain(fr.gains[a, b], (h, w)) for b in range(v)])
+                                      for a in range(u)])
                 out.append(DepthSample(f"{name} q{q} 1/{scale}", fr.centre, fr.disparity.astype(np.float32),
                                        view_disparities(fr.disparity, (u, v), axes=fr.axes),
-                                       view_offsets((u, v), fr.axes), gains.astype(np.float32), lf, present))
+                                       view_offsets((u, v), fr.axes), gains, lf, present))
     return out
 
 
@@ -244,7 +240,8 @@ def refiner_batch_loss(model, sample: DepthSample, recipe: Recipe, rng: np.rando
     ``sample``, ``recipe.views`` random present views each (the centre excluded), bilinear
     sampling of the whole centre view (no crop border), the shading gains multiplied in;
     MSE. ``zero``: the same with the corrections at zero (the hint)."""
-    from lfstream.models.warp import sample_bilinear
+    from lfstream.models.depth_net import view_correction
+    from lfstream.models.warp import pixel_grid, sample_bilinear
 
     c = recipe.crop
     h, w = sample.hint.shape
@@ -258,15 +255,14 @@ def refiner_batch_loss(model, sample: DepthSample, recipe: Recipe, rng: np.rando
     corr = model.corrections(crops, hints)
     if zero:
         corr = corr * 0
-    gy, gx = torch.meshgrid(torch.arange(c, device=device, dtype=torch.float32),
-                            torch.arange(c, device=device, dtype=torch.float32), indexing="ij")
+    gy, gx = pixel_grid(c, c, device, torch.float32)
     sy_all, sx_all, targets, gains = [], [], [], []
     for k, (y, x) in enumerate(zip(ys, xs)):
         for i in rng.choice(len(cand), min(recipe.views, len(cand)), replace=False):
             a, b = cand[i]
             oy, ox = sample.offsets[a, b]
             d = torch.from_numpy(sample.view_maps[a, b, y:y + c, x:x + c]).to(device)
-            d = d + corr[k, 0] + float(oy) * corr[k, 1] + float(ox) * corr[k, 2]
+            d = d + view_correction(corr[k], float(oy), float(ox))
             sy_all.append(gy + int(y) + d * float(oy))
             sx_all.append(gx + int(x) + d * float(ox))
             targets.append(sample.truth[a, b, y:y + c, x:x + c])

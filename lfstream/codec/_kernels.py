@@ -154,8 +154,11 @@ def _fill_holes(disp_row, dview_row):  # pragma: no cover - compiled
 
     In place is exact: a run's neighbours are splatted pixels, never a run filled before
     (a for loop with a run state, or a per-16-pixel minimum that skips whole blocks,
-    measured slower than this while loop).
+    measured slower than this while loop). A row without a hole (most rows) returns after
+    one vectorised minimum.
     """
+    if np.min(dview_row) > _HOLE_TEST:
+        return
     w = disp_row.shape[0]
     x = 0
     while x < w:
@@ -348,10 +351,8 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, occl
         if per_view:
             _row_taps(view_disp[u, v, y], cols, y, du, dv, h, idx, fxs, fys)
         elif splatted:
-            row = dview[y]
-            if np.min(row) <= _HOLE_TEST:  # a hole in this row (the splat's scratch): fill it
-                _fill_holes(disp[y], row)
-            _row_taps(row, cols, y, du, dv, h, idx, fxs, fys)
+            _fill_holes(disp[y], dview[y])  # the splat's scratch row, in place
+            _row_taps(dview[y], cols, y, du, dv, h, idx, fxs, fys)
         else:
             _row_taps(disp[y], cols, y, du, dv, h, idx, fxs, fys)
         if has_gains and channels == 3:
@@ -392,9 +393,7 @@ def splat_all_views(disp, offsets, occlusion, out):  # pragma: no cover - compil
         targets = np.empty(w, np.int32)
         _splat_view(disp, cols, du, dv, dview, targets)
         for y in range(h):
-            row = dview[y]
-            if np.min(row) <= _HOLE_TEST:
-                _fill_holes(disp[y], row)
+            _fill_holes(disp[y], dview[y])
 
 
 # RGB -> grey as OpenCV's 8-bit COLOR_RGB2GRAY computes it (BT.601 weights in 15-bit fixed

@@ -241,6 +241,17 @@ class GainDecoder:
         return dequantise_gains(q)
 
 
+def upsample_gain(gain: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """One view's gain map at full resolution, as the decoder applies it (OpenCV's
+    INTER_LINEAR resize; the warp kernel's taps are the same).
+
+    Shape:
+        - gain: ``(gh, gw, Cg)``; output: ``(H, W, Cg)`` float32
+    """
+    h, w = size
+    return cv2.resize(np.asarray(gain, np.float32), (w, h), interpolation=cv2.INTER_LINEAR).reshape(h, w, -1)
+
+
 def apply_gains(lf: np.ndarray, gains: np.ndarray) -> np.ndarray:
     """Multiplies each uint8 view ``(U, V, H, W, 3)`` by its upsampled gain map (a new array)."""
     u, v, h, w, c = lf.shape
@@ -251,7 +262,7 @@ def apply_gains(lf: np.ndarray, gains: np.ndarray) -> np.ndarray:
             if np.all(np.abs(g - 1.0) < 1e-6):
                 out[a, b] = lf[a, b]
                 continue
-            full = cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR).reshape(h, w, -1)
+            full = upsample_gain(g, (h, w))
             if full.shape[-1] != c:
                 full = np.repeat(full, c, axis=-1)
             # one saturating SIMD pass: uint8 x float32 -> uint8
@@ -260,4 +271,4 @@ def apply_gains(lf: np.ndarray, gains: np.ndarray) -> np.ndarray:
 
 
 __all__ = ["GAIN_DEADBAND", "GainDecoder", "GainReferenceError", "GainTracker", "shading_present", "measure_gains",
-           "quantise_gains", "dequantise_gains", "encode_gains", "decode_gains", "apply_gains"]
+           "quantise_gains", "dequantise_gains", "encode_gains", "decode_gains", "upsample_gain", "apply_gains"]

@@ -65,9 +65,7 @@ def warp_views(
     if centre.ndim != 3:
         raise LFShapeError(f"centre: expected (H, W, C), got shape {tuple(centre.shape)}")
     h, w, c = centre.shape
-    u, v = views
-    if not (1 <= u <= MAX_VIEWS_PER_AXIS and 1 <= v <= MAX_VIEWS_PER_AXIS):
-        raise LFValueError(f"views: each in 1..{MAX_VIEWS_PER_AXIS}, got {views}")
+    u, v = _check_views(views)
     d = np.broadcast_to(np.asarray(disparity, np.float32), (h, w))
     check_finite(d, "disparity")
     offsets = view_offsets((u, v), axes)
@@ -81,6 +79,14 @@ def warp_views(
 
         return apply_gains(flat, gains)
     return _warp_kernel(src, np.ascontiguousarray(d), None, offsets, occlusion, gains)
+
+
+def _check_views(views: tuple[int, int], name: str = "views") -> tuple[int, int]:
+    """``(U, V)``, each in 1..MAX_VIEWS_PER_AXIS (else LFValueError naming ``name``)."""
+    u, v = views
+    if not (1 <= u <= MAX_VIEWS_PER_AXIS and 1 <= v <= MAX_VIEWS_PER_AXIS):
+        raise LFValueError(f"{name}: each in 1..{MAX_VIEWS_PER_AXIS}, got {tuple(views)}")
+    return u, v
 
 
 def _check_gains(gains: np.ndarray | None, views: tuple[int, int], c: int) -> np.ndarray | None:
@@ -142,9 +148,7 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
     d = np.ascontiguousarray(disparity, np.float32)
     if d.ndim != 2:
         raise LFShapeError(f"disparity: expected (H, W), got shape {tuple(d.shape)}")
-    u, v = views
-    if not (1 <= u <= MAX_VIEWS_PER_AXIS and 1 <= v <= MAX_VIEWS_PER_AXIS):
-        raise LFValueError(f"views: each in 1..{MAX_VIEWS_PER_AXIS}, got {views}")
+    u, v = _check_views(views)
     check_finite(d, "disparity")
     from lfstream.codec._kernels import splat_all_views
 
@@ -172,9 +176,7 @@ def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray, axes: np.nd
     if centre.ndim != 3 or disparities.ndim != 4 or disparities.shape[2:] != centre.shape[:2]:
         raise LFShapeError(f"centre (H, W, C) and disparities (U, V, H, W) must agree; got {tuple(centre.shape)} "
                            f"and {tuple(disparities.shape)}")
-    u, v = disparities.shape[:2]
-    if not (1 <= u <= MAX_VIEWS_PER_AXIS and 1 <= v <= MAX_VIEWS_PER_AXIS):
-        raise LFValueError(f"disparities: each view axis in 1..{MAX_VIEWS_PER_AXIS}, got {(u, v)}")
+    u, v = _check_views(disparities.shape[:2], "disparities' views")
     maps = np.ascontiguousarray(disparities, np.float32)
     check_finite(maps, "disparities")
     src = np.ascontiguousarray(to_uint8(np.asarray(centre)))

@@ -167,6 +167,17 @@ class DepthRefinerConfig:
         return 8
 
 
+def view_correction(corrections, oy, ox):
+    """``c0 + oy * cy + ox * cx``: the refiner's correction of the view displaced by ``(oy,
+    ox)`` per unit disparity, from its three maps on axis -3 (numpy or torch; ``oy, ox``
+    scalars or arrays that broadcast against a map).
+
+    Shape:
+        - corrections: ``(..., 3, H, W)``; output: ``(..., H, W)`` broadcast with ``oy, ox``
+    """
+    return corrections[..., 0, :, :] + oy * corrections[..., 1, :, :] + ox * corrections[..., 2, :, :]
+
+
 def _conv(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
     return nn.Sequential(nn.Conv2d(cin, cout, 3, stride=stride, padding=1), nn.ELU())
 
@@ -223,11 +234,10 @@ class DepthRefiner(nn.Module):
 
     @staticmethod
     def apply(corrections: torch.Tensor, view_maps: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
-        """``view_maps + c0 + oy * cy + ox * cx`` per view (shapes as :class:`DepthRefiner`)."""
+        """``view_maps`` plus :func:`view_correction` per view (shapes as :class:`DepthRefiner`)."""
         oy = offsets[..., 0].to(corrections)[None, :, :, None, None]
         ox = offsets[..., 1].to(corrections)[None, :, :, None, None]
-        c0, cy, cx = (corrections[:, k, None, None] for k in range(3))
-        return view_maps + c0 + oy * cy + ox * cx
+        return view_maps + view_correction(corrections[:, None, None], oy, ox)
 
     def forward(self, centre: torch.Tensor, hint: torch.Tensor, view_maps: torch.Tensor,
                 offsets: torch.Tensor) -> torch.Tensor:
@@ -291,8 +301,7 @@ def predict_view_disparities(centres: np.ndarray, model: nn.Module, views: tuple
             # cost 60 ms at 7x7x375x540)
             offsets = view_offsets(views, a)
             for u, v in np.ndindex(*views):
-                oy, ox = offsets[u, v]
-                out[k, u, v] += c[0] + oy * c[1] + ox * c[2]
+                out[k, u, v] += view_correction(c, *offsets[u, v])
         return out
     maps = model(x, h).float().cpu().numpy()
     return np.ascontiguousarray(grid_disparities(maps, views))
@@ -309,5 +318,5 @@ def build_depth_net(preset: str = "fast", views: tuple[int, int] = (7, 7), hint:
     return DepthNet(replace(cfg, views=tuple(views), hint=cfg.hint if hint is None else hint))
 
 
-__all__ = ["DepthNetConfig", "DEPTH_PRESETS", "DepthNet", "DepthRefiner", "DepthRefinerConfig", "grid_disparities",
-           "predict_view_disparities", "build_depth_net", "count_params"]
+__all__ = ["DepthNetConfig", "DEPTH_PRESETS", "DepthNet", "DepthRefiner", "DepthRefinerConfig", "view_correction",
+           "grid_disparities", "predict_view_disparities", "build_depth_net", "count_params"]
