@@ -35,7 +35,8 @@ if TYPE_CHECKING:
 PSNR_CAP_DB = 100.0
 
 _SSIM_SIGMA = 1.5
-_SSIM_WIN = 11
+#: Side of the SSIM Gaussian window (Wang et al. 2004); SSIM is computed over its valid region.
+SSIM_WINDOW = 11
 _K1, _K2 = 0.01, 0.03
 
 
@@ -132,7 +133,7 @@ def psnr(x, y, data_range: float | None = None):
     return _out(out, is_torch)
 
 
-def _gaussian_1d(size: int = _SSIM_WIN) -> np.ndarray:
+def _gaussian_1d(size: int = SSIM_WINDOW) -> np.ndarray:
     """The normalised 1-D Gaussian (sigma 1.5) whose outer product is the SSIM window."""
     r = (size - 1) / 2
     g = np.exp(-((np.arange(size) - r) ** 2) / (2 * _SSIM_SIGMA**2))
@@ -148,7 +149,7 @@ def _ssim_from_moments(mu_a, mu_b, aa, bb, ab):
     return ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2))
 
 
-def ssim_nchw(a: torch.Tensor, b: torch.Tensor, data_range: float = 1.0, window: int = _SSIM_WIN) -> torch.Tensor:
+def ssim_nchw(a: torch.Tensor, b: torch.Tensor, data_range: float = 1.0, window: int = SSIM_WINDOW) -> torch.Tensor:
     """Differentiable SSIM of channel-first batches on any device, per image and channel.
 
     The valid region only; ``window`` (odd) may be smaller than 11 for tiny training crops.
@@ -174,8 +175,8 @@ def ssim_nchw(a: torch.Tensor, b: torch.Tensor, data_range: float = 1.0, window:
 def ssim_map_mean(tx: torch.Tensor, ty: torch.Tensor, rng: float) -> torch.Tensor:
     """SSIM of float tensors ``(..., H, W, C)`` already on a common dtype; returns ``(...)``."""
     h, w, c = tx.shape[-3:]
-    if h < _SSIM_WIN or w < _SSIM_WIN:
-        raise LFShapeError(f"ssim: images must be at least {_SSIM_WIN}x{_SSIM_WIN}, got {h}x{w}")
+    if h < SSIM_WINDOW or w < SSIM_WINDOW:
+        raise LFShapeError(f"ssim: images must be at least {SSIM_WINDOW}x{SSIM_WINDOW}, got {h}x{w}")
     lead = tx.shape[:-3]
     a = tx.reshape(-1, h, w, c).permute(0, 3, 1, 2)
     b = ty.reshape(-1, h, w, c).permute(0, 3, 1, 2)
@@ -210,8 +211,8 @@ def _ssim_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
 
     rng = _numpy_pair(x, y, data_range)
     h, w, c = x.shape[-3:]
-    if h < _SSIM_WIN or w < _SSIM_WIN:
-        raise LFShapeError(f"ssim: images must be at least {_SSIM_WIN}x{_SSIM_WIN}, got {h}x{w}")
+    if h < SSIM_WINDOW or w < SSIM_WINDOW:
+        raise LFShapeError(f"ssim: images must be at least {SSIM_WINDOW}x{SSIM_WINDOW}, got {h}x{w}")
 
     def rows(a: np.ndarray) -> np.ndarray:
         a = a if a.dtype in (np.uint8, np.float32) else a.astype(np.float32)
@@ -427,6 +428,7 @@ def bd_psnr(rates_a, dists_a, rates_b, dists_b, method: str = "pchip") -> float:
 
 __all__ = [
     "BD_METHODS",
+    "SSIM_WINDOW",
     "pareto_front",
     "bd_rate",
     "bd_psnr",

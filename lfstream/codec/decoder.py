@@ -22,7 +22,7 @@ import numpy as np
 from lfstream.codec.bitstream import CODEC_JPEG, Limits, Packet, StreamHeader, iter_packets, read_header
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
-from lfstream.codec.jpeg import deblock_jpeg, jpeg_quality_scale
+from lfstream.codec.jpeg import post_filter_jpeg
 from lfstream.codec.residual import VIEW_MODES, apply_residual, residual_mode
 from lfstream.codec.shading import GainDecoder, GainReferenceError
 from lfstream.codec.warp import warp_views, warp_views_per_view
@@ -72,10 +72,11 @@ class Decoder:
             ``"on"`` or ``"off"``.
         device: where the networks run (``"cpu"`` or ``"cuda"``).
         preset: network preset whose shipped weights are used.
-        deblock: the post-filter of JPEG centre views (:func:`lfstream.codec.jpeg.deblock_jpeg`,
-            strength from each JPEG's own quantisation table) where JPEG-Hance does not run
-            (the network takes the raw JPEG). It is part of the prediction a residual layer
-            corrects, so ``False`` decodes a residual stream's prediction alone.
+        deblock: the post-filter of JPEG centre views (:func:`lfstream.codec.jpeg.post_filter_jpeg`:
+            strength from each JPEG's own quantisation table, the filter the encoder named
+            in it) where JPEG-Hance does not run (a network gets the filter it was trained
+            after). It is part of the prediction a residual layer corrects, so ``False``
+            decodes a residual stream's prediction alone.
     """
 
     header: StreamHeader
@@ -156,13 +157,12 @@ class Decoder:
             - output: ``(B, H, W, 3)`` uint8
         """
         centres = np.stack([decode_centre(p.image, self.header.codec, self.header.size, p.seq) for p in packets])
-        # a network trained on post-filtered views gets them filtered whatever `deblock` says
+        # a network trained on post-filtered views gets them filtered whatever `deblock` says,
+        # and with the default filter, the one it was trained after
         filtered = self.deblock if self._hance is None else self._hance.config.after_deblock
         if filtered and self.header.codec == CODEC_JPEG:
             for k, p in enumerate(packets):
-                scale = jpeg_quality_scale(p.image)
-                if scale is not None:
-                    centres[k] = deblock_jpeg(centres[k], scale)
+                centres[k] = post_filter_jpeg(centres[k], p.image, p.seq, signalled=self._hance is None)
         if self._hance is not None:
             from lfstream.models.jpeg_hance import restore_images
 

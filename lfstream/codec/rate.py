@@ -31,7 +31,7 @@ import numpy as np
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_header, pack_packet
 from lfstream.codec.hint import HintOptions
 from lfstream.codec.intra import CentreCoding, encode_centre
-from lfstream.codec.jpeg import QUALITY_RANGE
+from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.residual import VIEW_MODES
 from lfstream.errors import LFValueError
 from lfstream.lightfield import centre_view, to_uint8
@@ -142,9 +142,11 @@ def _fitting_quality(size, target_bytes: float) -> int | None:
 
 
 def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeader, target_bytes: float,
-                  coding: CentreCoding) -> tuple[int, list[bytes]]:
+                  coding: CentreCoding, key_interval: int) -> tuple[int, list[bytes]]:
     """The quality whose stream is closest to ``target_bytes`` (:func:`_quality_bracket`;
-    sizes grow with quality) and that stream's centre-view payloads."""
+    sizes grow with quality) and that stream's centre-view payloads, JPEGs naming their
+    post-filter as an :class:`~lfstream.codec.encoder.Encoder` with hint key frames every
+    ``key_interval`` frames names it (the search sizes leave its 10 bytes out)."""
     centres = [centre_view(to_uint8(f)) for f in frames]
     cache: dict[int, tuple[int, list[bytes]]] = {}
 
@@ -156,7 +158,10 @@ def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeade
         return cache[q][0]
 
     q = min(_quality_bracket(size, target_bytes), key=lambda k: abs(size(k) - target_bytes))
-    return q, cache[q][1]
+    if coding.codec != "jpeg":
+        return q, cache[q][1]
+    chooser = PostFilterChooser(key_interval)
+    return q, [chooser.mark(c, img) for c, img in zip(centres, cache[q][1])]
 
 
 def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: StreamHeader, quality: int,
@@ -288,7 +293,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         for name in presets:
             enc_p = Encoder(quality=50, depth_hint=hint, hint_options=opts, gain_grid=gain_grid, preset=name)
             header = enc_p.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
-            q, images = _best_quality(frames, packets, header, target_bytes, enc_p.coding)
+            q, images = _best_quality(frames, packets, header, target_bytes, enc_p.coding, opts.key_interval)
             at_q, moved = _at_quality(header, packets, q, images, enc_p.coding)
             add(name, q, opts.hint_scale if hint else None, None, None, at_q, moved, opts)
         if not (residual and hint and opts.hint_scale == HintOptions().hint_scale and frames.shape[1] * frames.shape[2] > 1):
@@ -297,7 +302,8 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
                         residual=1)
         header_r = enc_r.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps)
         for share in RESIDUAL_SHARES:
-            q, images = _best_quality(frames, packets, header_r, share * target_bytes, enc_r.coding)
+            q, images = _best_quality(frames, packets, header_r, share * target_bytes, enc_r.coding,
+                                      opts.key_interval)
             found = _residual_candidate(frames, packets, header_r, q, images, enc_r.coding, res_preset, opts,
                                         gain_grid, target_bytes)
             if found is not None:
