@@ -238,8 +238,10 @@ def choose_post_filter(original: np.ndarray, data: bytes, bands: int = CHOICE_BA
     reference = np.stack([original[s:s + rows, a:b] for s, (a, b) in zip(starts, cols)])
     decoded_bands = np.stack([decoded[s:s + rows, a:b] for s, (a, b) in zip(starts, cols)])
 
+    reference_f = reference.astype(np.float32)
+
     def score(sample: np.ndarray) -> tuple[float, float]:
-        mse = float(np.mean((reference.astype(np.float32) - sample) ** 2))
+        mse = float(np.mean(np.square(reference_f - sample)))
         return float(np.mean(ssim(reference, sample))), -10.0 * np.log10(max(mse, 1e-10) / 255.0**2)
 
     samples = []
