@@ -88,12 +88,13 @@ class PostFilterChoice:
     index: int = 0
     black_floor: int = 0
 
-    def check(self, frame: int | None = None) -> PostFilterChoice:
-        if not 0 <= self.index < len(POST_FILTERS) or not 0 <= self.black_floor <= MAX_BLACK_FLOOR:
-            raise BitstreamError(f"centre view names post-filter {self.index} with black floor {self.black_floor}, "
-                                 f"this decoder knows filters 0..{len(POST_FILTERS) - 1}, floors 0..{MAX_BLACK_FLOOR}",
-                                 frame)
-        return self
+    @property
+    def valid(self) -> bool:
+        return 0 <= self.index < len(POST_FILTERS) and 0 <= self.black_floor <= MAX_BLACK_FLOOR
+
+    def __str__(self) -> str:
+        return (f"post-filter {self.index} with black floor {self.black_floor} (filters 0..{len(POST_FILTERS) - 1}, "
+                f"floors 0..{MAX_BLACK_FLOOR})")
 
 
 #: The JPEG comment segment that names a :class:`PostFilterChoice`: ``FF FE``, length 8,
@@ -144,23 +145,28 @@ def deblock_jpeg(img: np.ndarray, scale: float, post_filter: PostFilter = POST_F
                                post_filter.range_factor * float(scale), post_filter.spatial_sigma)
 
 
+def _names_post_filter(data: bytes) -> bool:
+    """Whether the JPEG ``data`` begins with a whole post-filter segment."""
+    return data.startswith(b"\xff\xd8" + _POST_FILTER_SEGMENT) and len(data) >= _NAMED + 2
+
+
 def named_post_filter(data: bytes, frame: int | None = None) -> PostFilterChoice:
     """The post-filter a JPEG payload names (:data:`POST_FILTER_TAG` right after SOI); the
     default where it names none."""
-    if not data.startswith(b"\xff\xd8" + _POST_FILTER_SEGMENT) or len(data) < _NAMED + 2:
+    if not _names_post_filter(data):
         return PostFilterChoice()
-    return PostFilterChoice(data[_NAMED], data[_NAMED + 1]).check(frame)
+    choice = PostFilterChoice(data[_NAMED], data[_NAMED + 1])
+    if not choice.valid:
+        raise BitstreamError(f"centre view names {choice}, beyond what this decoder knows", frame)
+    return choice
 
 
 def with_post_filter(data: bytes, choice: PostFilterChoice) -> bytes:
     """The JPEG ``data`` naming ``choice`` (the default: the bytes without the segment,
     which is what a JPEG without it gets anyway)."""
-    try:
-        choice.check()
-    except BitstreamError as exc:
-        raise LFValueError(f"post-filter choice: {exc}") from None
-    named = data.startswith(b"\xff\xd8" + _POST_FILTER_SEGMENT) and len(data) >= _NAMED + 2
-    body = data[_NAMED + 2:] if named else data[2:]
+    if not choice.valid:
+        raise LFValueError(f"post-filter choice: {choice} out of range")
+    body = data[_NAMED + 2:] if _names_post_filter(data) else data[2:]
     segment = _POST_FILTER_SEGMENT + bytes([choice.index, choice.black_floor]) if choice != PostFilterChoice() else b""
     return data[:2] + segment + body
 
@@ -236,8 +242,6 @@ def choose_post_filter(original: np.ndarray, data: bytes, bands: int = CHOICE_BA
     stacked = np.ascontiguousarray(np.concatenate([decoded[lo:hi, x0:x1] for (lo, hi), (x0, x1) in zip(chunks, spans)]))
     offsets = np.cumsum([0] + [hi - lo for lo, hi in chunks])[:-1]
     reference = np.stack([original[s:s + rows, a:b] for s, (a, b) in zip(starts, cols)])
-    decoded_bands = np.stack([decoded[s:s + rows, a:b] for s, (a, b) in zip(starts, cols)])
-
     reference_f = reference.astype(np.float32)
 
     def score(sample: np.ndarray) -> tuple[float, float]:
@@ -253,6 +257,7 @@ def choose_post_filter(original: np.ndarray, data: bytes, bands: int = CHOICE_BA
     choices = [PostFilterChoice(i) for i in range(len(POST_FILTERS))]
     black = (reference == 0).all(axis=-1)
     if black.mean() >= 0.01:  # where black decodes above 0: the level most of it decodes at
+        decoded_bands = np.stack([decoded[s:s + rows, a:b] for s, (a, b) in zip(starts, cols)])
         levels = np.bincount(decoded_bands[black].max(axis=-1), minlength=1)
         floor = int(np.argmax(levels))
         if 0 < floor <= MAX_BLACK_FLOOR:

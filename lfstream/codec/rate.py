@@ -287,8 +287,8 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     res_preset = RESIDUAL_PRESET if preset is None else preset
     for hint, opts in [(True, h) for h in hints] + [(False, HintOptions())]:
         # hints and gains do not depend on the preset: one encode per frame, the centre
-        # view recoded per preset and quality
-        enc = Encoder(quality=50, depth_hint=hint, hint_options=opts, gain_grid=gain_grid)
+        # view recoded per preset and quality (so no post-filter is measured on these q50 ones)
+        enc = Encoder(quality=50, depth_hint=hint, hint_options=opts, gain_grid=gain_grid, post_filter=False)
         packets = [enc.encode_frame(f, t, int(round(t * 1e6 / fps)), present) for t, f in enumerate(frames)]
         for name in presets:
             enc_p = Encoder(quality=50, depth_hint=hint, hint_options=opts, gain_grid=gain_grid, preset=name)
