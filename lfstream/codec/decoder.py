@@ -158,11 +158,13 @@ class Decoder:
         """
         centres = np.stack([decode_centre(p.image, self.header.codec, self.header.size, p.seq) for p in packets])
         # a network trained on post-filtered views gets them filtered whatever `deblock` says,
-        # and with the default filter, the one it was trained after
+        # with the filter the stream names: trained after the default one, JPEG-Hance fast
+        # still does better from the named one where the encoder chose another (seahorse q50
+        # centre view: 45.66 dB from the named filter's 45.34, 45.56 from the default's 44.84)
         filtered = self.deblock if self._hance is None else self._hance.config.after_deblock
         if filtered and self.header.codec == CODEC_JPEG:
             for k, p in enumerate(packets):
-                centres[k] = post_filter_jpeg(centres[k], p.image, p.seq, signalled=self._hance is None)
+                centres[k] = post_filter_jpeg(centres[k], p.image, p.seq)
         if self._hance is not None:
             from lfstream.models.jpeg_hance import restore_images
 

@@ -9,7 +9,7 @@ import torch
 
 import lfstream
 from lfstream.cli import main
-from lfstream.codec.hint import decode_hint, disparity_errors, encode_hint, estimate_disparity
+from lfstream.codec.hint import HintOptions, decode_hint, disparity_errors, encode_hint, estimate_disparity
 from lfstream.codec.warp import warp_views
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.metrics import capped, mpsnr, mssim, psnr
@@ -177,6 +177,29 @@ def test_baselines_round_trip_and_rate_search():
         view_order(3, 3, "zigzag")
 
 
+def test_the_centre_coding_beside_the_hint_gives_the_serial_bytes_and_errors(monkeypatch):
+    """With the hint, the centre view is coded on a worker thread beside the sweep: the
+    packets are those of the same work done in turn (frame by frame, the post-filter
+    choice's state included), and what the centre coding raises reaches the caller."""
+    import lfstream.codec.encoder as encoder_module
+    from lfstream.codec import Encoder
+
+    clip = synth_clip(4, 5, (48, 64), seed=3, noise=2.0, motion=0.5)
+    overlapped = Encoder(hint_options=HintOptions(key_interval=2))
+    serial = Encoder(hint_options=HintOptions(key_interval=2))
+    for t, frame in enumerate(clip.lf):
+        got = overlapped.encode_frame(frame, t, t)
+        image = serial._code_centre(frame[2, 2])
+        assert got.image == image and got.hint == serial._hints.encode(frame, t)
+
+    def broken(*args, **kwargs):
+        raise LFValueError("centre coding failed")
+
+    monkeypatch.setattr(encoder_module, "encode_centre", broken)
+    with pytest.raises(LFValueError, match="centre coding failed"):
+        Encoder().encode_frame(clip.lf[0], 0, 0)
+
+
 def test_encode_star_light_field_with_missing_views():
     """An HCI "star" (33 of 81 views): the codec needs only the centre view (the hint uses
     the views present) and the decoder reconstructs all 81; with the hint the present
@@ -200,11 +223,13 @@ def test_encode_star_light_field_with_missing_views():
 
 def test_hance_auto_on_cpu_leaves_the_fast_network_off_and_on_filters_first(monkeypatch):
     """``hance="auto"`` runs JPEG-Hance fast only on a GPU (on CPU it costs more than the
-    rest of the decode); ``"on"`` feeds it the centre view post-filtered as it was trained:
-    with the default filter, whichever the encoder named."""
+    rest of the decode); ``"on"`` feeds it the centre view post-filtered as it was trained,
+    with the filter the stream names (here the wider one, not the default)."""
+    from dataclasses import replace
+
     from lfstream.codec import Decoder
     from lfstream.codec.bitstream import iter_packets, read_header
-    from lfstream.codec.jpeg import decode_jpeg, post_filter_jpeg
+    from lfstream.codec.jpeg import PostFilterChoice, decode_jpeg, post_filter_jpeg, with_post_filter
 
     clip = synth_clip(1, 3, (64, 80), seed=4, motion=0)
     data = lfstream.encode(clip.lf, depth_hint=False)
@@ -213,6 +238,7 @@ def test_hance_auto_on_cpu_leaves_the_fast_network_off_and_on_filters_first(monk
     fh = io.BytesIO(data)
     read_header(fh)
     packet = next(iter_packets(fh, header))
+    packet = replace(packet, image=with_post_filter(packet.image, PostFilterChoice(2)))
     seen = []
     import lfstream.models.jpeg_hance as jh
 
@@ -221,7 +247,8 @@ def test_hance_auto_on_cpu_leaves_the_fast_network_off_and_on_filters_first(monk
                         or real(images, model, device))
     Decoder(header, hance="on", deblock=False).decode_centres([packet])
     raw = decode_jpeg(packet.image, header.size)
-    assert (seen[0] == post_filter_jpeg(raw, packet.image, signalled=False)).all()
+    assert (seen[0] == post_filter_jpeg(raw, packet.image)).all()
+    assert not (seen[0] == post_filter_jpeg(raw, with_post_filter(packet.image, PostFilterChoice()))).all()
     assert (Decoder(header, hance="off").decode_centres([packet])[0] == post_filter_jpeg(raw, packet.image)).all()
 
 

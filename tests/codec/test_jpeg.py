@@ -113,7 +113,6 @@ def test_a_post_filter_segment_names_the_filter_and_keeps_the_pixels():
         expected = deblock_jpeg(raw, jpeg_quality_scale(data), POST_FILTERS[choice.index])
         expected[(expected <= choice.black_floor).all(-1)] = 0
         assert np.array_equal(post_filter_jpeg(raw, marked), expected)
-        assert np.array_equal(post_filter_jpeg(raw, marked, signalled=False), post_filter_jpeg(raw, data))
     for bad in (PostFilterChoice(len(POST_FILTERS)), PostFilterChoice(0, 17)):
         with pytest.raises(LFValueError, match="post-filter choice"):
             with_post_filter(data, bad)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import lfstream.codec.residual as residual
-from lfstream.codec.watchdog import call_with_deadline, encoder_deadline
+from lfstream.codec.watchdog import call_with_deadline, encoder_deadline, in_background
 from lfstream.errors import EncoderStalledError, LFStreamError
 
 
@@ -19,6 +19,26 @@ def release():
     event = threading.Event()
     yield event
     event.set()
+
+
+def test_in_background_runs_beside_the_caller_and_hands_back_its_outcome():
+    started, go = threading.Event(), threading.Event()
+
+    def job():
+        started.set()
+        assert go.wait(5.0)  # runs while the caller goes on: the caller releases it
+        return threading.current_thread().name
+
+    fut = in_background(job)
+    assert started.wait(5.0)
+    go.set()
+    assert fut.result(5.0).startswith("lfstream-worker")
+
+    def fail():
+        raise KeyError("inner")
+
+    with pytest.raises(KeyError, match="inner"):
+        in_background(fail).result(5.0)
 
 
 def test_returns_value_and_propagates_errors():
