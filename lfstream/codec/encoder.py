@@ -157,8 +157,8 @@ class Encoder:
         hint = b""
         if self.depth_hint:
             # the centre view's coding (and the post-filter choice, 7-11 ms on key frames)
-            # does not depend on the hint: overlapped with it on a second thread (measured on
-            # lytro_bikes, 2 cores: a single-frame encode 24 -> 17 ms); same bytes
+            # does not depend on the hint: overlapped with it on a worker thread (measured on
+            # lytro_bikes, 2 cores: a single-frame encode 24.8 -> 20.2 ms); same bytes
             centre_job = in_background(lambda: self._code_centre(centre))
             hint = self._hints.encode(frame, seq, present)
             image = centre_job.result()
