@@ -289,12 +289,15 @@ class PostFilterChooser:
 
 def jpeg_roundtrip(img: np.ndarray, quality: int, deblock: bool = False) -> np.ndarray:
     """A uint8 RGB image through JPEG at ``quality`` and back: unfiltered by default (what
-    the paper JPEG-Hance takes), or with ``deblock`` the decoder's post-filter at the JPEG's
-    own strength (:func:`deblock_jpeg`: what the decoder's default shows, and what a network
-    trained after the filter takes)."""
+    the paper JPEG-Hance takes), or with ``deblock`` as lfstream's decoder shows it: through
+    the post-filter the encoder chooses for it (:func:`choose_post_filter`, named in the
+    payload, applied by :func:`post_filter_jpeg`), which is what a network trained after the
+    filter takes at decode time."""
     data = encode_jpeg(img, quality)
     out = decode_jpeg(data, img.shape[:2])
-    return post_filter_jpeg(out, data) if deblock else out
+    if not deblock:
+        return out
+    return post_filter_jpeg(out, with_post_filter(data, choose_post_filter(img, data)))
 
 
 __all__ = ["QUALITY_RANGE", "PostFilter", "POST_FILTERS", "MAX_BLACK_FLOOR", "PostFilterChoice", "POST_FILTER_TAG",
