@@ -71,13 +71,14 @@ class Recipe:
 
 
 DEFAULT_STEPS = {"jpeg_hance": 3000, "depth_net": 3000, "refnet": 3000}
-#: Real scenes the hint refiner (Depth-Net fast) trains on: the same split as JPEG-Hance.
+#: Real scenes the hint refiner (Depth-Net fast) and a post-filter JPEG-Hance train on: one
+#: Lytro capture, one HCI render, the camera array; seahorse, cotton and lytro_translucent
+#: stay out: the held-out test.
 DEPTH_TRAIN_SCENES = HANCE_TRAIN_SCENES = ("lytro_bikes", "dino", "toys_array")
-#: JPEG qualities it trains at.
+#: JPEG qualities the refiner trains at.
 DEPTH_QUALITIES = (30, 50, 70)
-#: (the same three for a post-filter JPEG-Hance: one Lytro capture, one HCI render, the
-#: camera array; seahorse, cotton and lytro_translucent stay out: the held-out test)
-#: JPEG qualities it trains at: around the default (50) and where rate control goes.
+#: JPEG qualities a post-filter JPEG-Hance trains at: around the default (50) and where rate
+#: control goes.
 HANCE_QUALITIES = (30, 40, 50, 60, 70)
 DEFAULT_BATCH = {"jpeg_hance": 32, "depth_net": 8, "refnet": 8}
 DEFAULT_CROP = {"jpeg_hance": 64, "depth_net": 96, "refnet": 128}
@@ -134,7 +135,9 @@ def real_hance_batch(views: list[np.ndarray], recipe: Recipe, rng: np.random.Gen
 
     Augmented for what the training scenes lack: 30 % darkened (scale 0..0.5, minus up to 20
     levels: black backgrounds such as the rendered seahorse's), 9 % flat colour with 0..2
-    levels of noise, half mirrored; then JPEG at a random recipe quality and the post-filter.
+    levels of noise, half mirrored; then JPEG at a random recipe quality and the post-filter
+    the encoder chooses for the crop (:func:`lfstream.codec.jpeg.jpeg_roundtrip`), as the
+    decoder would apply it.
     """
     c = recipe.crop
     xs, ys = [], []
