@@ -30,8 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(more bits, quality that keeps rising with rate; default: none, --bpp decides itself)")
     p.add_argument("--residual-mode", choices=RESIDUAL_MODES, default="prediction",
                    help="what the residual layer codes: prediction (the prediction's error, the default), views "
-                   "(the views themselves: for scenes warping cannot predict; no warp at decode) or half-views "
-                   "(the same at half size, for the lowest rates)")
+                   "(the views themselves: for scenes warping cannot predict; no warp at decode; with "
+                   "--preset balanced|best and --residual equal to --quality the centre view is the views "
+                   "sequence's key frame) or half-views (the same at half size, for the lowest rates)")
     hint = p.add_mutually_exclusive_group()
     hint.add_argument("--depth-hint", dest="depth_hint", action="store_true", default=True,
                       help="send the encoder's disparity estimate (the default)")

@@ -658,13 +658,6 @@ _CB_B = int(round(1.773 * (1 << _YCC_BITS)))
 
 
 @numba.njit(fastmath=True, cache=True, nogil=True, inline="always")
-def _add_level(dst_row, x, c, res, offset):  # pragma: no cover - compiled
-    """``dst_row[x, c] += clip(res, 0, 255) - offset``, saturated to 8 bits (branch-free:
-    random residual signs made the branches cost 2x)."""
-    dst_row[x, c] = np.uint8(_clip_u8(np.int32(dst_row[x, c]) + _clip_u8(res) - offset))
-
-
-@numba.njit(fastmath=True, cache=True, nogil=True, inline="always")
 def _clip_u8(v):  # pragma: no cover - compiled
     """``clip(v, 0, 255)`` of an int32 without branches (arithmetic shifts of the sign)."""
     v = v & ~(v >> np.int32(31))
@@ -672,11 +665,21 @@ def _clip_u8(v):  # pragma: no cover - compiled
 
 
 @numba.njit(**_ROW)
-def _i420_residual_row(dst_row, flat, y, height, width, offset):  # pragma: no cover - compiled
-    """One row of ``dst += rgb(planes) - offset``. Chroma is up-sampled bilinearly with the
-    centre-aligned phase of 2x2 means (OpenCV's INTER_LINEAR resize): at 2x the taps are
-    always 3/4 and 1/4, so the whole interpolation is integer: (9a + 3b + 3c + d + 8) / 16.
-    ``flat``: PyAV's (3H/2, W) yuv420p layout flattened (H*W luma, then Cb, then Cr)."""
+def _i420_residual_row(dst_row, flat, y, height, width, offset, store, vcb, vcr, hcb, hcr, rgb):  # pragma: no cover
+    """One row of ``dst = rgb(planes)`` (``store``) or ``dst += rgb(planes) - offset``,
+    saturated to 8 bits. Chroma is up-sampled bilinearly with the centre-aligned phase of
+    2x2 means (OpenCV's INTER_LINEAR resize): at 2x the taps are always 3/4 and 1/4, so the
+    whole interpolation is integer: (9a + 3b + 3c + d + 8) / 16. Each step is a loop over
+    contiguous arrays (the chroma rows, the per-pixel chroma, the three colour rows) that
+    LLVM vectorises; only the last interleaves into ``dst_row`` (measured on 48 views of
+    375 x 541: 54 -> 16 ms for the views themselves, where one per-pixel loop with the
+    column taps chosen per pixel did not vectorise).
+
+    Args:
+        dst_row: ``(W * 3,)`` uint8 output row. flat: PyAV's (3H/2, W) yuv420p layout
+            flattened (H*W luma, then Cb, then Cr). vcb, vcr: ``(W / 2,)`` int32 scratch;
+            hcb, hcr: ``(W,)`` int32 scratch; rgb: ``(3, W)`` int32 scratch.
+    """
     ch, cw = height // 2, width // 2
     cb0 = height * width
     cr0 = cb0 + ch * cw
@@ -687,37 +690,67 @@ def _i420_residual_row(dst_row, flat, y, height, width, offset):  # pragma: no c
         near, far = m, max(m - 1, 0)
     near *= cw
     far *= cw
-    half = np.int32(1 << (_YCC_BITS - 1))
-    # the vertical 3/4-1/4 blend once per chroma column, then two output pixels share it
-    vcb = np.empty(cw, np.int32)
-    vcr = np.empty(cw, np.int32)
-    for n in range(cw):
+    for n in range(cw):  # the vertical blend once per chroma column
         vcb[n] = 3 * np.int32(flat[cb0 + near + n]) + np.int32(flat[cb0 + far + n])
         vcr[n] = 3 * np.int32(flat[cr0 + near + n]) + np.int32(flat[cr0 + far + n])
-    for x in range(dst_row.shape[0]):
-        n = x >> 1
-        o = min(n + 1, cw - 1) if x & 1 else max(n - 1, 0)  # column 2n+1: taps n, n+1; 2n: n, n-1
-        cb = ((3 * vcb[n] + vcb[o] + 8) >> 4) - 128
-        cr = ((3 * vcr[n] + vcr[o] + 8) >> 4) - 128
-        luma = np.int32(flat[y * width + x])
-        _add_level(dst_row, x, 0, luma + ((_CR_R * cr + half) >> _YCC_BITS), offset)
-        _add_level(dst_row, x, 1, luma + ((half - _CR_G * cr - _CB_G * cb) >> _YCC_BITS), offset)
-        _add_level(dst_row, x, 2, luma + ((_CB_B * cb + half) >> _YCC_BITS), offset)
+    # horizontal: output column 2n takes chroma columns n (3/4) and n-1, 2n+1 takes n and
+    # n+1, clamped at the ends
+    hcb[0] = ((4 * vcb[0] + 8) >> 4) - 128
+    hcr[0] = ((4 * vcr[0] + 8) >> 4) - 128
+    for n in range(cw - 1):
+        hcb[2 * n + 1] = ((3 * vcb[n] + vcb[n + 1] + 8) >> 4) - 128
+        hcr[2 * n + 1] = ((3 * vcr[n] + vcr[n + 1] + 8) >> 4) - 128
+        hcb[2 * n + 2] = ((3 * vcb[n + 1] + vcb[n] + 8) >> 4) - 128
+        hcr[2 * n + 2] = ((3 * vcr[n + 1] + vcr[n] + 8) >> 4) - 128
+    hcb[2 * cw - 1] = ((4 * vcb[cw - 1] + 8) >> 4) - 128
+    hcr[2 * cw - 1] = ((4 * vcr[cw - 1] + 8) >> 4) - 128
+    half = np.int32(1 << (_YCC_BITS - 1))
+    row0 = y * width
+    w = dst_row.shape[0] // 3
+    for x in range(w):
+        luma = np.int32(flat[row0 + x])
+        rgb[0, x] = _clip_u8(luma + ((_CR_R * hcr[x] + half) >> _YCC_BITS))
+        rgb[1, x] = _clip_u8(luma + ((half - _CR_G * hcr[x] - _CB_G * hcb[x]) >> _YCC_BITS))
+        rgb[2, x] = _clip_u8(luma + ((_CB_B * hcb[x] + half) >> _YCC_BITS))
+    if store:
+        for x in range(w):
+            dst_row[3 * x] = np.uint8(rgb[0, x])
+            dst_row[3 * x + 1] = np.uint8(rgb[1, x])
+            dst_row[3 * x + 2] = np.uint8(rgb[2, x])
+    else:  # branch-free saturation (random residual signs made branches cost 2x)
+        for x in range(w):
+            for c in range(3):
+                dst_row[3 * x + c] = np.uint8(_clip_u8(np.int32(dst_row[3 * x + c]) + rgb[c, x] - offset))
+
+
+_I420_ROWS = 16  # rows per parallel job (one set of scratch rows each)
 
 
 @numba.njit(**_PARALLEL)
-def add_i420_residual(lf, planes, positions, offset):  # pragma: no cover - compiled
-    """Adds decoded residual frames to their views, in place: view ``positions[n]`` of
-    ``lf`` gets ``rgb(planes[n]) - offset``, saturated to 8 bits.
+def add_i420_residual(lf, planes, positions, offset, store):  # pragma: no cover - compiled
+    """Decoded residual frames into their views, in place: view ``positions[n]`` of ``lf``
+    gets ``rgb(planes[n]) - offset`` added, saturated to 8 bits, or (``store``) is
+    overwritten with ``rgb(planes[n])`` (a residual of the views themselves: no read of
+    ``lf``, no zeroing first).
 
-    Shapes: lf (U, V, H, W, 3) uint8; planes (N, 3 * PH / 2, PW) uint8 (PyAV's yuv420p
-    layout, PH, PW the even-padded size); positions (N, 2) int64; offset: int.
+    Shapes: lf (U, V, H, W, 3) uint8, C-contiguous; planes (N, 3 * PH / 2, PW) uint8
+    (PyAV's yuv420p layout, PH, PW the even-padded size); positions (N, 2) int64; offset: int.
     """
     h = lf.shape[2]
+    w3 = lf.shape[3] * 3
     ph = planes.shape[1] * 2 // 3
     pw = planes.shape[2]
     n = positions.shape[0]
-    for job in numba.prange(n * h):
-        k = job // h
-        y = job % h
-        _i420_residual_row(lf[positions[k, 0], positions[k, 1], y], planes[k].ravel(), y, ph, pw, np.int32(offset))
+    blocks = (h + _I420_ROWS - 1) // _I420_ROWS
+    for job in numba.prange(n * blocks):
+        k = job // blocks
+        y0 = (job % blocks) * _I420_ROWS
+        vcb = np.empty(pw // 2, np.int32)
+        vcr = np.empty(pw // 2, np.int32)
+        hcb = np.empty(pw, np.int32)
+        hcr = np.empty(pw, np.int32)
+        rgb = np.empty((3, pw), np.int32)
+        flat = planes[k].ravel()
+        view = lf[positions[k, 0], positions[k, 1]].reshape(h, w3)
+        for y in range(y0, min(y0 + _I420_ROWS, h)):
+            _i420_residual_row(view[y], flat, y, ph, pw, np.int32(offset), store, vcb, vcr, hcb, hcr, rgb)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.codec.bitstream import CODEC_JPEG, Limits, Packet, StreamHeader, iter_packets, read_header
+from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, Limits, Packet, StreamHeader, iter_packets, read_header
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
 from lfstream.codec.jpeg import post_filter_jpeg
@@ -193,7 +193,9 @@ class Decoder:
 
     def _add_residual(self, packet: Packet, frame: DecodedFrame) -> DecodedFrame:
         if packet.residual and (self.applies_residual or self._views_only(packet)):
-            apply_residual(frame.lf, packet.residual, packet.seq)
+            # a views sequence may start with the centre payload's key frame (format 4)
+            centre = packet.image if self.header.codec == CODEC_AV1 else None
+            apply_residual(frame.lf, packet.residual, packet.seq, centre)
         elif packet.residual:
             self.residual_skipped += 1
         return frame

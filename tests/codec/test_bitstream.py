@@ -122,7 +122,10 @@ def test_fuzz_mutations_never_crash_or_hang(stream):
     hinted = encode(synth_clip(2, 3, (32, 32), seed=2, vignetting=0.6).lf, depth_hint=True)
     av1 = encode(synth_clip(2, 3, (32, 32), seed=3).lf, preset="balanced")  # version 2: an AV1 centre view
     residual = encode(synth_clip(1, 3, (32, 32), seed=4).lf, residual=50)  # version 3: a residual layer
-    counts = fuzz([stream, hinted, av1, residual], 300, seed=2024)
+    # the views as one AV1 sequence keyed by the centre payload (residual format 4)
+    keyed = encode(synth_clip(1, 3, (32, 32), seed=5).lf, preset="balanced", quality=50, residual=50,
+                   residual_mode="views")
+    counts = fuzz([stream, hinted, av1, residual, keyed], 300, seed=2024)
     assert counts["decoded"] + counts["rejected"] == 300 and counts["rejected"] > 200  # CRCs catch nearly all
 
 
