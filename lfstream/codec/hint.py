@@ -233,6 +233,7 @@ def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale:
 _AXES_SCALE = 4  # the detection's resolution divisor; an accepted fit is refined at the sweep's working one
 _AXES_MAX_GAIN = 0.5  # the fit's mean flow residual must be below this share of the convention's
 _AXES_MIN_SHIFT = 0.25  # px of the full view a warped pixel must move for the axes to matter
+_AXES_SAMPLES = 2048  # textured pixels the fit keeps at most (every k-th: a few thousand fix 4 numbers)
 
 
 def _flows(images: np.ndarray, scale: int, preset: int) -> np.ndarray:
@@ -275,6 +276,7 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int) ->
     sel = np.flatnonzero(texture > np.median(texture))
     if sel.size < 32:
         return identity, False
+    sel = sel[::-(-sel.size // _AXES_SAMPLES)]
     flows = _flows(images, scale, preset)[:, by:h - by, bx:w - bx].reshape(len(steps), -1, 2)[:, sel]
     f = np.empty((2 * len(steps), sel.size), np.float64)  # rows dy_j, dx_j; one column per pixel
     f[0::2] = flows[..., 1]
