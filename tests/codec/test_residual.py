@@ -272,6 +272,10 @@ def test_keyed_views_sequence_costs_one_intra_frame():
     # the centre payload is an AV1 key frame that decodes alone, no worse than the centre
     # coded apart (measured 26.27 against 25.64 dB: the sequence's key frame gets more bits)
     assert psnr(decode_av1(centre, (64, 96)), lf[2, 2]) > psnr(decode_av1(alone, (64, 96)), lf[2, 2]) - 0.3
+    # the views modes' slowest preset (VIEWS_SPEED with best) is deterministic too
+    from lfstream.codec.encoder import VIEWS_SPEED
+
+    assert encode_views_keyed(lf, 40, VIEWS_SPEED["best"]) == encode_views_keyed(lf, 40, VIEWS_SPEED["best"])
 
 
 def test_views_residual_beats_the_prediction_where_no_warp_predicts(unpredictable):
