@@ -176,9 +176,10 @@ class Encoder:
         frame = to_uint8(np.asarray(lf))
         centre = centre_view(frame)
         hint = b""
-        if self.keys_views:  # the centre view is the views' key frame: coded with them below
-            hint = self._hints.encode(frame, seq, present) if self.depth_hint else b""
+        if self.keys_views:  # the centre view is the views' key frame: coded with them (add_residual)
             image = b""
+            if self.depth_hint:
+                hint = self._hints.encode(frame, seq, present)
         elif self.depth_hint:
             # the centre view's coding (and the post-filter choice, 7-11 ms on key frames)
             # does not depend on the hint: overlapped with it on a worker thread (measured on

@@ -150,8 +150,13 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray | None, quality: int,
         return np.clip(lf[a, b].astype(np.int16) - prediction[a, b] + OFFSET, 0, 255).astype(np.uint8)
 
     packets = _encode_sequence(frame_at, len(order), (h, w), quality, speed, "AV1 residual sequence")
-    chunks = [_LEN.pack(len(data)) + data for data in packets]
-    return _HEAD.pack(fmt, CODEC_AV1, len(order)) + b"".join(chunks)
+    return _payload(fmt, len(order), packets)
+
+
+def _payload(fmt: int, frames: int, packets: list[bytes]) -> bytes:
+    """A residual payload of format ``fmt`` covering ``frames`` views: the head, then each AV1
+    packet behind its length."""
+    return _HEAD.pack(fmt, CODEC_AV1, frames) + b"".join(_LEN.pack(len(data)) + data for data in packets)
 
 
 def _encode_sequence(frame_at, count: int, size: tuple[int, int], quality: int, speed: int,
@@ -202,8 +207,7 @@ def encode_views_keyed(lf: np.ndarray, quality: int, speed: int) -> tuple[bytes,
     packets = _encode_sequence(lambda k: lf[order[k]], len(order), (h, w), quality, speed, "AV1 views sequence")
     if len(packets) < 2:  # pragma: no cover - SVT-AV1 emits one packet per shown frame
         raise LFValueError("AV1 views sequence: the encoder emitted a single packet")
-    body = b"".join(_LEN.pack(len(data)) + data for data in packets[1:])
-    return packets[0], _HEAD.pack(VIEWS_KEYED_FORMAT, CODEC_AV1, len(order) - 1) + body
+    return packets[0], _payload(VIEWS_KEYED_FORMAT, len(order) - 1, packets[1:])
 
 
 def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
@@ -290,7 +294,6 @@ def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None, centre
     planes = decode_residual(data, (u, v), (h, w), frame, centre)
     positions = np.array(residual_views((u, v)), np.int64)
     mode = residual_mode(data)
-    offset = 0 if mode == "views" else OFFSET  # the views themselves: no offset
     if mode == "half-views":  # small views: converted, then up-sampled
         import cv2
 
@@ -300,7 +303,7 @@ def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None, centre
         return lf
     # the kernel writes rows of the (U, V, H, W * 3) layout
     target = lf if lf.flags.c_contiguous else np.ascontiguousarray(lf)
-    add_i420_residual(target, planes, positions, offset, mode == "views")  # views: stored, not added
+    add_i420_residual(target, planes, positions, OFFSET, mode == "views")  # views: stored (no offset), not added
     if target is not lf:
         lf[...] = target
     return lf
