@@ -160,9 +160,9 @@ def is_standard(axes: np.ndarray | None) -> bool:
     return axes is None or bool(np.array_equal(np.asarray(axes), np.eye(2)))
 
 
-def sweep_views(u: int, v: int, present: np.ndarray | None = None) -> list[tuple[int, int]]:
-    """The views the sweep compares with the centre: corners and edge mid-points (the
-    largest baselines); where those are missing, the farthest present views."""
+def _ring_views(u: int, v: int, present: np.ndarray | None = None) -> list[tuple[int, int]]:
+    """Corners and edge mid-points (the largest baselines); where those are missing, the
+    farthest present views."""
     u0, v0 = u // 2, v // 2
     ring = {(a, b) for a in (0, u0, u - 1) for b in (0, v0, v - 1)} - {(u0, v0)}
     ok = [k for k in sorted(ring) if present is None or present[k]]
@@ -171,6 +171,26 @@ def sweep_views(u: int, v: int, present: np.ndarray | None = None) -> list[tuple
     others = [(a, b) for a in range(u) for b in range(v) if (a, b) != (u0, v0) and (present is None or present[a, b])]
     others.sort(key=lambda k: -(abs(k[0] - u0) + abs(k[1] - v0)))
     return others[:8]
+
+
+def sweep_views(u: int, v: int, present: np.ndarray | None = None) -> list[tuple[int, int]]:
+    """The views the sweep compares with the centre: the outer ring (:func:`_ring_views`,
+    first) for precision, then the four views next to the centre.
+
+    The short baselines resolve periodic texture (multi-baseline stereo): a stripe or checker
+    of period ``p`` matches every outer view (all ``k`` steps from the centre) at a false
+    disparity ``p / k`` as well as it does at the true one, but not the views one step away.
+    Measured on 12 synthetic scenes (7x7x375x540, seeds 0-11, noise and vignetting): the
+    ring alone put the coarse pass on such false matches on half of them (hint error
+    MSE x 100 441 on average, 377 median, against the ground truth); with the inner four,
+    21 (7.7 median), MPSNR of the default decode +2.9 dB on average.
+    """
+    keys = _ring_views(u, v, present)
+    u0, v0 = u // 2, v // 2
+    for k in ((u0 - 1, v0), (u0, v0 - 1), (u0, v0 + 1), (u0 + 1, v0)):
+        if 0 <= k[0] < u and 0 <= k[1] < v and k not in keys and (present is None or present[k]):
+            keys.append(k)
+    return keys
 
 
 def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int) -> np.ndarray:
@@ -364,7 +384,8 @@ def estimate_view_axes(lf: np.ndarray, present: np.ndarray | None = None,
     if not keys:
         return np.eye(2, dtype=np.float32)
     steps = np.asarray([(a - centre[0], b - centre[1]) for a, b in keys], np.float64)
-    return _detect_axes(_grids(frame, [centre, *keys], work_scale), steps, _axes_views(keys, centre), work_scale)
+    use = _axes_views(keys[: len(_ring_views(u, v, present))], centre)
+    return _detect_axes(_grids(frame, [centre, *keys], work_scale), steps, use, work_scale)
 
 
 def scene_range(disparity: np.ndarray, margin: float) -> tuple[float, float]:
@@ -407,7 +428,8 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     if axes is None:
         axes = identity
         if options.geometry == "auto":
-            axes = _detect_axes(grids, steps, _axes_views(keys, centre), work)
+            # the axes from the outer ring alone: the longest flows, and the fit it was tuned on
+            axes = _detect_axes(grids, steps, _axes_views(keys[: len(_ring_views(u, v, present))], centre), work)
     axes = np.asarray(axes, np.float32)
     rows, cols = np.asarray(keys).T
     grid_offsets = view_offsets((u, v), axes)

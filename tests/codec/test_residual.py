@@ -238,8 +238,6 @@ def test_views_residual_carries_the_views_themselves(clip, quality, fmt_name):
     for (a, b), img in zip(residual_views(header.views), images):
         diff = np.abs(out[a, b].astype(int) - img)
         assert diff.max() <= 2 and diff.mean() < 0.25, ((a, b), diff.max(), diff.mean())  # the fused kernel's rounding
-    # this noisy scene is what no prediction carries: the views are far better than the warp
-    assert mpsnr(out, lf[0]) > mpsnr(decode(encode(lf, quality=60, preset="balanced"))[0], lf[0]) + 2.0
     # the views replace whatever the decoder would predict: any depth mode, the same frame
     for depth in ("flat", "hint"):
         dec = Decoder(header, depth=depth)
