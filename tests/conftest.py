@@ -64,3 +64,21 @@ def shifted_views(lf: np.ndarray, idx, slope: float) -> np.ndarray:
         out.append(cv2.warpAffine(as_float(lf[u, v]), m, (lf.shape[3], lf.shape[2]),
                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP))
     return np.stack(out)
+
+
+@pytest.fixture(scope="module")
+def unpredictable():
+    """Views that no disparity explains: each a smooth texture moved by its own random
+    offset (as a camera rig that is not a grid), which a sequence codec's motion search
+    follows and a warp of the centre view cannot."""
+    import cv2
+
+    rng = np.random.default_rng(5)
+    base = cv2.GaussianBlur(rng.uniform(0, 255, (96, 128, 3)).astype(np.float32), (0, 0), 2.5)
+    base = cv2.normalize(base, None, 0, 255, cv2.NORM_MINMAX)
+    lf = np.empty((5, 5, 64, 96, 3), np.uint8)
+    for a in range(5):
+        for b in range(5):
+            dy, dx = (0, 0) if (a, b) == (2, 2) else rng.integers(0, 32, 2)
+            lf[a, b] = np.clip(base[dy:dy + 64, dx:dx + 96] + 0.5, 0, 255).astype(np.uint8)
+    return lf

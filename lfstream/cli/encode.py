@@ -22,8 +22,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="quality of the centre view (default 50)")
     rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target size in bits per pixel: rate control picks the "
                       "preset (unless --preset), quality, hint and hint precision (best first-frame MPSNR within 15 %%)")
-    p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG, the default), balanced "
-                   "(AV1, SVT preset 12), best (AV1, SVT preset 8); with --bpp, the default is to try all three")
+    p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG), balanced "
+                   "(AV1, SVT preset 12), best (AV1, SVT preset 8). Default: fast, unless the first frame shows "
+                   "that warping cannot predict the views (then the views as one AV1 sequence, balanced); with "
+                   "--bpp, the default is to try all three")
     p.add_argument("--residual", type=int_in(QUALITY_RANGE), metavar="Q",
                    help="quality 1..100 of the residual layer: every view's prediction "
                    "error coded as one AV1 sequence "
@@ -56,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     fps = args.fps or loaded.fps or 30.0
     quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
     residual, residual_mode = args.residual, args.residual_mode
+    prediction_db = None  # the default's check of its own prediction (rate.choose_default)
     if args.bpp is not None and (residual is not None or residual_mode != "prediction"):
         raise LFValueError("--residual: rate control (--bpp) chooses the residual layer itself; give one or the other")
     if residual_mode != "prediction" and residual is None:
@@ -70,6 +73,19 @@ def run(args: argparse.Namespace) -> int:
         residual_mode = rate.residual_mode
         stats = write_stream_file(args.output, rate.header, rate.packets)
         stats.encode_s = time.perf_counter() - t0  # the search included
+    elif args.preset is None and depth_hint and residual is None:
+        # the default: the fast preset, unless its prediction misses the views (then the views)
+        from lfstream.codec.rate import choose_default
+
+        t0 = time.perf_counter()
+        choice = choose_default(frames[0], quality, loaded.present, fps=fps)
+        first_s = time.perf_counter() - t0
+        enc = choice.encoder
+        preset, depth_hint, residual, residual_mode = enc.preset, enc.depth_hint, enc.residual, enc.residual_mode
+        stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), enc, fps=fps,
+                            present=loaded.present, first=choice.first)
+        stats.encode_s += first_s  # frame 0's fast encode and the check
+        prediction_db = choice.prediction_db
     else:
         stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]),
                             Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
@@ -80,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
                    "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": quality, "depth_hint": depth_hint,
                    "preset": preset, "residual": residual, "residual_mode": residual_mode if residual is not None else None,
                    "residual_bpp": bpp(stats.residual_bytes, frames.shape)})
+    if prediction_db is not None:
+        result["prediction_db"] = prediction_db
     if rate is not None:
         result["rate_control"] = {"target_bpp": args.bpp, "candidates": list(rate.candidates)}
     emit(args, result, lambda r: f"{r['frames']} frame(s) -> {args.output}: {r['bytes']} bytes, {r['bpp']:.5f} bpp"

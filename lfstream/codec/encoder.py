@@ -22,7 +22,7 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_version
 from lfstream.codec.hint import HintOptions, HintTracker
-from lfstream.codec.intra import CentreCoding, encode_centre
+from lfstream.codec.intra import CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.shading import GainTracker, measure_gains, shading_present
 from lfstream.codec.watchdog import in_background
@@ -49,8 +49,11 @@ RESIDUAL_SPEED = {"fast": 12, "balanced": 12, "best": 8}
 #: ``half-views``): there the AV1 sequence *is* the stream, so ``best`` takes SVT-AV1's
 #: slowest preset lfstream allows. Measured on toys_array (9x9x240x320, views with the
 #: centre as key frame, qualities 20-65): preset 4 codes 16-24 % fewer bytes than preset 8 at
-#: -0.25…+0.37 dB, for 1.1 s a sequence instead of 0.5 s (2-core EPYC).
-VIEWS_SPEED = {"fast": 12, "balanced": 12, "best": 4}
+#: -0.25…+0.37 dB, for 1.1 s a sequence instead of 0.5 s (2-core EPYC). ``balanced`` takes
+#: preset 8 (the default's choice where warping cannot predict, :func:`lfstream.codec.rate.choose_default`):
+#: toys_array at q50 0.280 bpp / 32.87 dB / MSSIM 0.9473 in 0.52 s, against preset 10's 0.381 bpp /
+#: 32.45 dB / 0.9374 in 0.22 s, which falls below x265 medium at its size.
+VIEWS_SPEED = {"fast": 12, "balanced": 8, "best": 4}
 
 
 def preset_coding(preset: str) -> CentreCoding:
@@ -117,10 +120,15 @@ class Encoder:
         self._hints = HintTracker(self.hint_options)
         self._gains = GainTracker(self.hint_options.key_interval)  # key maps with the key hints' interval
         self._post_filters = PostFilterChooser(self.hint_options.key_interval)
+        self.last_gains: np.ndarray | None = None  # the last frame's gain maps as measured (None: none sent)
 
     def header(self, views: tuple[int, int], size: tuple[int, int], fps: float) -> StreamHeader:
         from lfstream import __version__
 
+        if (self.coding.codec == "av1" or self.residual is not None) and not av1_fits(size):
+            raise LFValueError(f"preset {self.preset!r}" + (" with a residual layer" if self.residual is not None else "")
+                               + f": AV1 codes views of at least 3x3 pixels, these are {size[0]}x{size[1]}; "
+                               "use the fast preset (JPEG) without a residual")
         meta = {"encoder": ENCODER_NAME, "version": __version__, "quality": int(self.quality), "gain_grid": self.gain_grid}
         if self.coding.codec != "jpeg":  # JPEG streams keep the version-1 header byte for byte
             meta["preset"] = self.preset
@@ -143,6 +151,12 @@ class Encoder:
         """Whether the views' sequence starts with the centre view as its key frame (the
         centre payload): mode ``views``, an AV1 centre, one quality for both."""
         return self.residual_mode == "views" and self.coding.codec == "av1" and self.residual == self.quality
+
+    @property
+    def last_hint(self):
+        """The last frame's hint as the decoder rebuilds it
+        (:class:`lfstream.codec.hint.QuantisedHint`), ``None`` before the first or without one."""
+        return self._hints.last if self.depth_hint else None
 
     @property
     def residual_speed(self) -> int:
@@ -195,7 +209,8 @@ class Encoder:
             gains = measure_gains(frame, self.gain_grid, present=present,
                                   disparity=None if sent is None else sent.values(),
                                   axes=None if sent is None else sent.axes)
-            gain = self._gains.encode(gains if shading_present(gains) else None, seq)
+            self.last_gains = gains if shading_present(gains) else None
+            gain = self._gains.encode(self.last_gains, seq)
         packet = Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
         if self.residual is not None and frame.shape[0] * frame.shape[1] > 1:
             packet = self.add_residual(packet, frame, self.residual)
@@ -294,8 +309,11 @@ def encode(
     target size in bits per pixel instead of ``quality`` and ``depth_hint``: rate control
     (:mod:`lfstream.codec.rate`) picks the quality, whether to send the hint and, unless
     ``preset`` names one, the preset, and whether and how well to code the residual layer.
-    ``preset``: the centre view's coding (:data:`PRESETS`; default ``fast``, the seed's
-    JPEG). ``residual``: quality 1..100 of the residual layer (:mod:`lfstream.codec.residual`),
+    ``preset``: the centre view's coding (:data:`PRESETS`). ``None`` (the default, with the
+    hint and no residual named): ``fast``, the seed's JPEG and hint, unless the first frame
+    shows that warping cannot predict the scene; then the views are coded as one AV1
+    sequence keyed by the centre view (:func:`lfstream.codec.rate.choose_default`). A named
+    preset is used as it is. ``residual``: quality 1..100 of the residual layer (:mod:`lfstream.codec.residual`),
     ``None`` (the default) for none; ``residual_mode``: what it codes (``prediction`` or
     ``views``, :attr:`Encoder.residual_mode`). ``post_filter``: name the decoder's JPEG
     post-filter the encoder measured best (:attr:`Encoder.post_filter`; ``False``: the
@@ -319,12 +337,22 @@ def encode(
             raise LFValueError("post_filter: rate control (bpp) names the post-filter itself; give one or the other")
         # rate control encoded every frame already: its stream is the answer
         return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream()
-    enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(), gain_grid=gain_grid,
-                  preset=preset or DEFAULT_PRESET, residual=residual, residual_mode=residual_mode, post_filter=post_filter)
+    first = None
+    if preset is None and depth_hint and residual is None and residual_mode == "prediction":
+        from lfstream.codec.rate import choose_default
+
+        check_lf(frames[0], allow_video=False)
+        choice = choose_default(frames[0], quality, present, hint_options, gain_grid, fps, post_filter=post_filter)
+        enc, first = choice.encoder, choice.first
+    else:
+        enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(),
+                      gain_grid=gain_grid, preset=preset or DEFAULT_PRESET, residual=residual,
+                      residual_mode=residual_mode, post_filter=post_filter)
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
     for t, frame in enumerate(frames):
-        writer.write(enc.encode_frame(frame, t, int(round(t * 1e6 / fps)), present))
+        writer.write(first if t == 0 and first is not None else
+                     enc.encode_frame(frame, t, int(round(t * 1e6 / fps)), present))
     return buf.getvalue()
 
 
@@ -341,13 +369,19 @@ def write_stream_file(path: str | os.PathLike, header: StreamHeader, packets: It
 
 
 def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tuple[int, int], size: tuple[int, int],
-                encoder: Encoder, fps: float = 30.0, present: np.ndarray | None = None) -> EncodeStats:
-    """Encodes frames into an ``.lfs`` file, written atomically; returns byte counts and timing."""
+                encoder: Encoder, fps: float = 30.0, present: np.ndarray | None = None,
+                first: Packet | None = None) -> EncodeStats:
+    """Encodes frames into an ``.lfs`` file, written atomically; returns byte counts and timing.
+    ``first``: frame 0's packet where ``encoder`` coded it already
+    (:func:`lfstream.codec.rate.choose_default`)."""
     spent = 0.0
 
     def packets():
         nonlocal spent
         for t, frame in enumerate(frames):
+            if t == 0 and first is not None:
+                yield first
+                continue
             t0 = time.perf_counter()
             packet = encoder.encode_frame(frame, t, int(round(t * 1e6 / fps)), present)
             spent += time.perf_counter() - t0

@@ -108,6 +108,17 @@ def pad_to_even(img: np.ndarray) -> np.ndarray:
     return np.pad(img, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
 
 
+#: SVT-AV1 refuses frames smaller than 4 x 4 (after padding to even): AV1 codes views of at
+#: least 3 x 3 pixels.
+AV1_MIN_SIZE = 4
+
+
+def av1_fits(size: tuple[int, int]) -> bool:
+    """Whether SVT-AV1 can code views of ``size`` (H, W) (:data:`AV1_MIN_SIZE`)."""
+    h, w = size
+    return h + h % 2 >= AV1_MIN_SIZE and w + w % 2 >= AV1_MIN_SIZE
+
+
 def svtav1_encoder(size: tuple[int, int], quality: int, speed: int, gop: int | None = None):
     """An SVT-AV1 encoder context for even-sized 4:2:0 frames at ``quality`` (1..100, mapped
     by :func:`av1_crf`) and preset ``speed``; ``gop``: the key-frame interval, if set."""
@@ -182,6 +193,7 @@ def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int 
     raise BitstreamError(f"unknown centre-view codec id {codec_id}", frame)
 
 
-__all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
+__all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "AV1_MIN_SIZE", "av1_fits",
+           "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
            "svtav1_encoder",
            "encode_av1", "decode_av1", "encode_centre", "decode_centre"]

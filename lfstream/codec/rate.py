@@ -20,6 +20,14 @@ are the better stream (toys_array), elsewhere the measurement leaves them out.
 
 A stream sees one frame at a time: it chooses on its first frame and then follows the
 budget frame by frame (:func:`follow_rate`).
+
+Without a target (the default encode: no ``bpp``, no preset named) the choice is cheaper:
+:func:`choose_default` codes the first frame the fast way (JPEG centre view and hint) and
+checks, at the hint's resolution, how well the centre view and the hint predict the outer
+views (:func:`prediction_psnr`); where they miss by far (a camera array whose views are
+tens of pixels apart, a rig that is not a grid) no warp can carry the scene, and the
+stream codes the views themselves instead (``views``, the ``balanced`` preset: one AV1
+sequence keyed by the centre view).
 """
 
 from __future__ import annotations
@@ -30,7 +38,7 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_header, pack_packet
 from lfstream.codec.hint import HintOptions
-from lfstream.codec.intra import CentreCoding, encode_centre
+from lfstream.codec.intra import CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.residual import VIEW_MODES
 from lfstream.errors import LFValueError
@@ -50,6 +58,16 @@ RESIDUAL_PRESET = "best"
 FOLLOW_MAX_STEP = 6
 #: ... and only when the next frame's share of the budget is off the last frame by more than this.
 FOLLOW_DEADBAND = 0.03
+#: The default encode's floor on :func:`prediction_psnr` (dB): below it the stream codes the
+#: views. Measured (at the hint's 1/4 resolution, luma): 33.1-47.5 dB on every shared sample
+#: but toys_array, 30.0-38.5 on 12 synthetic 7x7 scenes with noise and vignetting at 375x540,
+#: 27.0 and up at 40x48 and 64x96; toys_array 19.0 (~7.5 px of disparity per view step:
+#: disocclusions everywhere), 20.4 at half size.
+PREDICTION_FLOOR_DB = 22.0
+#: Views whose hint grid is smaller than this many cells a side are not checked (the fast
+#: preset): on a handful of cells the check measures borders, not the scene (a 5x5x40x48 clip
+#: measured 24.5 dB, and 26.0 at 64x96, a scene the warp predicts).
+PREDICTION_CHECK_MIN_CELLS = 16
 #: Relative size change per quality step the follower assumes (AV1 centre views measured 3-5 %,
 #: JPEG 1.5-3 % around the qualities rate control picks).
 FOLLOW_STEP_GROWTH = 0.04
@@ -75,6 +93,87 @@ class RateChoice:
     def stream(self) -> bytes:
         """The chosen ``.lfs`` stream."""
         return pack_header(self.header) + b"".join(pack_packet(p, self.header.version) for p in self.packets)
+
+
+@dataclass(frozen=True)
+class DefaultChoice:
+    """What the default encode chose on a stream's first frame (:func:`choose_default`).
+
+    Attributes:
+        encoder: the stream's encoder; where ``first`` is set it has coded frame 0 already.
+        first: frame 0's packet, or ``None`` when the encoder still has to code it.
+        prediction_db: :func:`prediction_psnr` of frame 0 (``None``: not measured).
+    """
+
+    encoder: object  # lfstream.codec.encoder.Encoder (imported lazily: rate is imported by it)
+    first: Packet | None
+    prediction_db: float | None
+
+    @property
+    def codes_views(self) -> bool:
+        """Whether the stream codes the views themselves (the prediction missed)."""
+        return bool(self.encoder.codes_views)
+
+
+def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, present: np.ndarray | None = None) -> float:
+    """How well the centre view and a hint predict the outer ring of views: the mean PSNR
+    (dB) of the decoder's warp (:func:`lfstream.codec.warp.warp_views_at`) against those
+    views, on luma block means at the hint's resolution (where sensor and coding noise are
+    small, so a noisy capture is not mistaken for an unpredictable one). About 2 ms for a
+    7x7x375x540 frame.
+
+    Args:
+        lf: one frame ``(U, V, H, W, 3)`` uint8, C-contiguous.
+        hint: the hint as the decoder rebuilds it (:class:`lfstream.codec.hint.QuantisedHint`).
+        gains: ``(U, V, gh, gw, C)`` gain maps the stream sends (their channel mean is
+            applied to the luma), or ``None``.
+        present: ``(U, V)`` mask of the views that exist.
+    """
+    from lfstream.codec.hint import _grids, _ring_views
+    from lfstream.codec.warp import warp_views_at
+    from lfstream.metrics import psnr
+
+    u, v = lf.shape[:2]
+    ring = _ring_views(u, v, present)
+    if not ring:
+        return float("inf")
+    grids = _grids(lf, [(u // 2, v // 2), *ring], hint.scale)  # (1 + J, H // s, W // s) in [0, 1]
+    disparity = hint.values()[: grids.shape[1], : grids.shape[2]] / np.float32(hint.scale)
+    if gains is not None:
+        gains = np.asarray(gains, np.float32).mean(axis=-1, keepdims=True)
+    pred = warp_views_at(grids[0][..., None], disparity, (u, v), ring, gains, hint.axes)
+    return float(np.mean(psnr(grids[1:, ..., None], pred.astype(np.float32) / np.float32(255.0), 1.0)))
+
+
+def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | None = None,
+                   hint_options: HintOptions | None = None, gain_grid: int = 4, fps: float = 30.0,
+                   views_hint: bool = False, post_filter: bool = True) -> DefaultChoice:
+    """The default encode's configuration for a stream whose first frame is ``frame``: the
+    fast preset with the hint, unless its prediction of the views misses by far
+    (:data:`PREDICTION_FLOOR_DB`), then the views coded as one AV1 sequence keyed by the
+    centre view (``balanced`` preset, ``views`` at ``quality``; the hint only with
+    ``views_hint``). The fast encoder's work on frame 0 is kept (``first``): the check costs
+    a few milliseconds on top of it, once per stream.
+
+    Shape:
+        - frame: ``(U, V, H, W, 3)``
+    """
+    from lfstream.codec.encoder import Encoder
+
+    opts = hint_options or HintOptions()
+    enc = Encoder(quality=quality, depth_hint=True, hint_options=opts, gain_grid=gain_grid, post_filter=post_filter)
+    first = enc.encode_frame(frame, 0, 0, present)
+    u, v = frame.shape[:2]
+    cells = min(frame.shape[2:4]) // enc.last_hint.scale
+    if u * v == 1 or (present is not None and not np.all(present)) or cells < PREDICTION_CHECK_MIN_CELLS:
+        # nothing to predict, views a sequence would not carry, or too few cells to tell
+        return DefaultChoice(enc, first, None)
+    db = prediction_psnr(np.ascontiguousarray(to_uint8(np.asarray(frame))), enc.last_hint, enc.last_gains, present)
+    if db >= PREDICTION_FLOOR_DB:
+        return DefaultChoice(enc, first, db)
+    views = Encoder(quality=quality, depth_hint=views_hint, hint_options=opts, gain_grid=gain_grid, preset="balanced",
+                    residual=quality, residual_mode="views", post_filter=post_filter)
+    return DefaultChoice(views, None, db)
 
 
 def _stream_bytes(header: StreamHeader, packets) -> int:
@@ -269,6 +368,11 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     if preset is not None:
         preset_coding(preset)  # an unknown name fails before any encoding
     presets = tuple(PRESETS) if preset is None else (preset,)
+    if not av1_fits(frames.shape[3:5]):  # views too small for AV1: the JPEG preset alone, no residual
+        if preset not in (None, "fast"):
+            raise LFValueError(f"preset {preset!r}: AV1 codes views of at least 3x3 pixels, these are "
+                               f"{frames.shape[3]}x{frames.shape[4]}")
+        presets, residual = ("fast",), False
     pixels = int(np.prod(frames.shape[:5]))
     target_bytes = target_bpp * pixels / 8.0
     candidates = []
@@ -332,4 +436,6 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
 
 
 __all__ = ["RATE_TOLERANCE", "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "FOLLOW_MAX_STEP",
-           "FOLLOW_DEADBAND", "FOLLOW_STEP_GROWTH", "RateChoice", "choose_configuration", "follow_rate"]
+           "FOLLOW_DEADBAND", "FOLLOW_STEP_GROWTH", "PREDICTION_FLOOR_DB", "PREDICTION_CHECK_MIN_CELLS",
+           "RateChoice", "DefaultChoice",
+           "choose_configuration", "choose_default", "follow_rate", "prediction_psnr"]

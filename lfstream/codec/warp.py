@@ -81,6 +81,39 @@ def warp_views(
     return _warp_kernel(src, np.ascontiguousarray(d), None, offsets, occlusion, gains)
 
 
+def warp_views_at(centre: np.ndarray, disparity: np.ndarray, views: tuple[int, int], keys: list[tuple[int, int]],
+                  gains: np.ndarray | None = None, axes: np.ndarray | None = None) -> np.ndarray:
+    """:func:`warp_views` for the views ``keys`` of a ``views`` grid only (the same kernel and
+    pixels; the encoder's check of its own prediction needs a few views, not all).
+
+    Args:
+        centre: ``(H, W, C)`` uint8 or float in ``[0, 1]``.
+        disparity: ``(H, W)`` centre-view disparity, px per view step.
+        views: ``(U, V)`` of the grid ``keys`` index.
+        keys: ``(u, v)`` of the views to synthesise.
+        gains: ``(U, V, gh, gw, 1 or C)`` per-view gain maps of the whole grid, or ``None``.
+        axes: ``(2, 2)`` view axes; ``None``: the convention.
+
+    Shape:
+        - output: ``(len(keys), H, W, C)`` uint8
+    """
+    if centre.ndim != 3 or np.ndim(disparity) != 2 or np.shape(disparity) != centre.shape[:2]:
+        raise LFShapeError(f"centre (H, W, C) and disparity (H, W) must agree; got {tuple(centre.shape)} "
+                           f"and {np.shape(disparity)}")
+    u, v = _check_views(views)
+    rows, cols = np.asarray(keys, np.int64).reshape(-1, 2).T
+    if np.any(rows < 0) or np.any(rows >= u) or np.any(cols < 0) or np.any(cols >= v):
+        raise LFValueError(f"keys: views of a {u}x{v} grid, got {list(keys)}")
+    d = np.ascontiguousarray(disparity, np.float32)
+    check_finite(d, "disparity")
+    src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
+    gains = _check_gains(gains, (u, v), src.shape[2])
+    offsets = np.ascontiguousarray(view_offsets((u, v), axes)[rows, cols][None])  # a 1 x len(keys) grid
+    if gains is not None:
+        gains = np.ascontiguousarray(gains[rows, cols][None])
+    return _warp_kernel(src, d, None, offsets, True, gains)[0]
+
+
 def _check_views(views: tuple[int, int], name: str = "views") -> tuple[int, int]:
     """``(U, V)``, each in 1..MAX_VIEWS_PER_AXIS (else LFValueError naming ``name``)."""
     u, v = views
@@ -185,4 +218,4 @@ def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray, axes: np.nd
                         gains)
 
 
-__all__ = ["view_disparities", "warp_views", "warp_views_per_view"]
+__all__ = ["view_disparities", "warp_views", "warp_views_at", "warp_views_per_view"]

@@ -193,6 +193,7 @@ class EncoderStage(ConsumerStage):
         self.encoder = config.encoder()
         self.rate = RateStats()
         self.started = False
+        self.prediction_db: float | None = None  # the default's check of its prediction (rate.choose_default)
 
     def work(self, item: SourceFrame) -> Packet:
         lf = item.lf
@@ -206,6 +207,16 @@ class EncoderStage(ConsumerStage):
             self.encoder = Encoder(quality=choice.quality, depth_hint=choice.depth_hint, preset=choice.preset,
                                    hint_options=choice.hint_options, residual=choice.residual,
                                    residual_mode=choice.residual_mode)
+        first = None
+        if not self.started and self.config.bpp is None and self.config.preset is None and self.config.depth_hint \
+                and self.config.residual is None:
+            # the default: the fast preset, unless its prediction misses the views; the hint is
+            # sent either way (the focal planes are fitted to the decoded disparity)
+            from lfstream.codec.rate import choose_default
+
+            choice = choose_default(lf, self.config.quality, self.present, fps=self.config.fps, views_hint=True)
+            self.encoder, first = choice.encoder, choice.first
+            self.prediction_db = choice.prediction_db
         pixels = int(np.prod(lf.shape[:4]))
         if not self.started:
             self.channel.send_header(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
@@ -219,7 +230,11 @@ class EncoderStage(ConsumerStage):
                                                self.rate.pixels, last, pixels)
             if self.encoder.codes_views:  # its bits are the views': one quality for all
                 self.encoder.residual = self.encoder.quality
-        packet = self.encoder.encode_frame(lf, item.seq, int(round(item.seq * 1e6 / self.config.fps)), self.present)
+        if first is not None and item.seq == 0:
+            packet = first  # the default's choice coded frame 0 already
+        else:
+            packet = self.encoder.encode_frame(lf, item.seq, int(round(item.seq * 1e6 / self.config.fps)),
+                                               self.present)
         self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain) + len(packet.residual), pixels,
                       self.encoder.quality)
         return packet

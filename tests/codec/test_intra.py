@@ -141,3 +141,17 @@ def test_cli_encode_takes_a_preset(scene, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["encode", str(tmp_path / "lf.npy"), "-o", str(tmp_path / "b.lfs"), "--preset", "slowest"])
     assert exc.value.code == 2
+
+
+@pytest.mark.parametrize("size", [(1, 17), (13, 1), (2, 2)])
+def test_views_too_small_for_av1_are_a_clear_error_and_the_default_still_codes_them(size):
+    """SVT-AV1 refuses frames under 4x4: AV1 presets and residuals name the limit (an
+    LFValueError, not the library's error); the default and rate control keep to JPEG."""
+    from lfstream.errors import LFValueError
+
+    lf = np.random.default_rng(0).integers(0, 256, (3, 3, *size, 3), dtype=np.uint8)
+    for kwargs in ({"preset": "balanced"}, {"preset": "fast", "residual": 50, "residual_mode": "views"}):
+        with pytest.raises(LFValueError, match="at least 3x3"):
+            lfstream.encode(lf, **kwargs)
+    for data in (lfstream.encode(lf), lfstream.encode(lf, bpp=0.5)):
+        assert lfstream.decode(data)[0].shape == lf.shape

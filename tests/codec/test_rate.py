@@ -126,3 +126,44 @@ def test_a_stream_under_a_budget_lands_on_it_though_later_frames_cost_less(monke
         m.setattr(rate, "FOLLOW_MAX_STEP", 0)
         kept = run()
     assert kept["bpp"] < 0.85 * target  # the later frames' deltas: 20-30 % under
+
+
+def test_the_default_codes_the_views_where_warping_cannot_predict_them(unpredictable):
+    """The default encode (no preset named) checks its own prediction on the first frame:
+    views no disparity explains are coded as one AV1 sequence (measured: 20.6 dB by the
+    check; the stream 35.7 dB against the fast preset's 16.6 at about twice its bytes)."""
+    from lfstream.codec.bitstream import split_stream
+    from lfstream.codec.rate import PREDICTION_FLOOR_DB, choose_default
+
+    choice = choose_default(unpredictable)
+    assert choice.codes_views and choice.first is None and choice.prediction_db < PREDICTION_FLOOR_DB
+    data = lfstream.encode(unpredictable)
+    header, _ = split_stream(data)
+    assert header.meta["residual"]["mode"] == "views" and header.meta["preset"] == "balanced"
+    fast = lfstream.encode(unpredictable, preset="fast")  # a named preset is used as it is
+    assert split_stream(fast)[0].version == 1
+    gain = mpsnr(lfstream.decode(data)[0], unpredictable) - mpsnr(lfstream.decode(fast)[0], unpredictable)
+    assert gain > 10.0, gain
+
+
+def test_the_default_is_the_fast_preset_byte_for_byte_where_the_warp_predicts():
+    """Where the prediction holds, the default's stream is the fast preset's, the first
+    frame's packet reused from the check (not coded twice)."""
+    from lfstream.codec.rate import PREDICTION_FLOOR_DB, choose_default
+
+    clip = synth_clip(3, 7, (96, 128), seed=3, noise=1.0, vignetting=0.2, motion=0.5).lf
+    choice = choose_default(clip[0])
+    assert not choice.codes_views and choice.first is not None and choice.prediction_db > PREDICTION_FLOOR_DB + 3
+    assert lfstream.encode(clip) == lfstream.encode(clip, preset="fast")
+
+
+def test_cli_encode_reports_the_defaults_check(unpredictable, tmp_path, capsys):
+    src = tmp_path / "rig.npy"
+    np.save(src, unpredictable)
+    assert main(["encode", str(src), "-o", str(tmp_path / "rig.lfs"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["residual_mode"] == "views" and out["preset"] == "balanced" and out["prediction_db"] < 22.0
+    assert open(tmp_path / "rig.lfs", "rb").read() == lfstream.encode(unpredictable)
+    assert main(["encode", str(src), "-o", str(tmp_path / "fast.lfs"), "--preset", "fast", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["residual"] is None and "prediction_db" not in out

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from lfstream.codec.shading import apply_gains
-from lfstream.codec.warp import view_disparities, warp_views, warp_views_per_view
-from lfstream.errors import LFShapeError
+from lfstream.codec.warp import view_disparities, warp_views, warp_views_at, warp_views_per_view
+from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import view_offsets
 from lfstream.synth import synth_clip
 
@@ -187,3 +187,18 @@ def test_per_view_warp_of_the_view_disparities_is_the_warp(occlusion, rng):
     assert np.array_equal(warp_views_per_view(centre, maps, axes, gains), want)
     with pytest.raises(LFShapeError):
         view_disparities(disp[None], (5, 3))
+
+
+def test_warping_selected_views_gives_those_views_of_the_whole_warp():
+    """warp_views_at (the encoder's check of its prediction) is warp_views restricted to some
+    views: the same kernel, the same pixels, with gains and view axes."""
+    clip = synth_clip(1, 5, (40, 56), seed=2, vignetting=0.3)
+    centre, d = clip.lf[0, 2, 2], clip.disparity[0, 2, 2]
+    gains = np.random.default_rng(1).uniform(0.8, 1.2, (5, 5, 2, 3, 3)).astype(np.float32)
+    axes = np.float32([[0.0, 1.0], [1.0, 0.1]])
+    keys = [(0, 0), (0, 4), (2, 3), (4, 1)]
+    whole = warp_views(centre, d, (5, 5), gains=gains, axes=axes)
+    some = warp_views_at(centre, d, (5, 5), keys, gains=gains, axes=axes)
+    np.testing.assert_array_equal(some, np.stack([whole[k] for k in keys]))
+    with pytest.raises(LFValueError, match="keys"):
+        warp_views_at(centre, d, (5, 5), [(5, 0)])
