@@ -1,6 +1,8 @@
 """lfstream's codec against HEVC and AV1 pseudo-sequences at matched rate.
 
-For each light field: lfstream at JPEG quality 50 (the default, with the depth hint; and flat),
+For each light field (the synthetic clip and every shared sample; the HCI stars as their centre
+3x3): lfstream at quality 50 (the default: the JPEG centre view and the depth hint, or the
+views as one AV1 sequence where the encoder finds that warping cannot predict them; and flat),
 then x265 medium, x265 ultrafast and SVT-AV1 searched to the default's bits per pixel, with
 the speed ratios against x265 and HEVC decode; for all: bpp, MPSNR, MSSIM, the
 depth-of-field image's PSNR/SSIM, near/far refocused images' PSNR/SSIM (seed: alpha = 0.15
@@ -17,13 +19,13 @@ from __future__ import annotations
 import os
 
 import numpy as np
-from _harness import ROOT, emit, parser, timeit
+from _harness import emit, parser, timeit
+from rd import scenes
 
 import lfstream
 from lfstream.codec.baseline import decode_views, encode_at_bpp, encode_views
 from lfstream.metrics import bpp, capped, dof_psnr, dof_ssim, mpsnr, mssim, psnr, ssim
 from lfstream.refocus import focal_stack
-from lfstream.synth import synth_clip
 
 os.environ.setdefault("SVT_LOG", "1")
 REFOCUS_ALPHAS = (0.15, 1.5)
@@ -76,14 +78,8 @@ def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = 
 def main(argv=None) -> dict:
     args = parser(__doc__).parse_args(argv)
     runs = 1 if args.quick else args.runs
-    size = (128, 160) if args.quick else (375, 540)
-    cases = [("synthetic noisy", synth_clip(1, 7, size, seed=21, noise=2.0, vignetting=0.3, motion=0, camera_pan=0).lf[0])]
-    data = ROOT.parent / "shared" / "data"
-    for name, folder in (("seahorse5x5", "seahorse5x5/camImagesFlat"), ("lytro_bikes", "lytro_bikes"),
-                         ("lytro_translucent", "lytro_translucent")):
-        if (data / folder).exists() and not (args.quick and name != "seahorse5x5"):
-            lf = lfstream.read_lf(data / folder)
-            cases.append((name, lf[:, :, :256, 128:384] if args.quick else lf))
+    # the synthetic clip and every shared sample (rd.py's scenes: HCI stars as their centre 3x3)
+    cases = scenes(args.quick, None)
     results = []
     for name, lf in cases:
         results += evaluate(name, lf, runs)
