@@ -8,7 +8,7 @@ from pathlib import Path
 
 from lfstream.cli._common import add_read_options, emit, int_in, read_options
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
-from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS
+from lfstream.codec.encoder import PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
 
 HELP = "encode or decode a collection of LF videos, in this process or on a Ray cluster"
@@ -29,8 +29,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--group", type=int_in((1, 1 << 20)), default=8, help="frames per job (default 8)")
     p.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="encode: JPEG quality of the centre view")
     p.add_argument("--no-depth-hint", action="store_true", help="encode: send only the centre view")
-    p.add_argument("--preset", choices=tuple(PRESETS), default=DEFAULT_PRESET,
-                   help="encode: centre-view coding, fast (JPEG), balanced or best (AV1)")
+    p.add_argument("--preset", choices=tuple(PRESETS),
+                   help="encode: centre-view coding, fast (JPEG), balanced or best (AV1); default: as lfstream "
+                   "encode chooses for each input (fast from 7x7 views, AV1 with fewer, the views themselves "
+                   "where warping cannot predict them)")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto", help="decode: disparity source")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto", help="decode: JPEG-Hance")
     p.add_argument("--device", default="cpu", help="decode: where the networks run")

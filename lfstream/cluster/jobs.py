@@ -26,24 +26,45 @@ class EncodeOptions:
 
     quality: int = 50
     depth_hint: bool = True
-    # the centre view's coding (lfstream.codec.encoder.PRESETS): fast = JPEG, balanced / best = AV1
-    preset: str = "fast"
+    # the centre view's coding (lfstream.codec.encoder.PRESETS): fast = JPEG, balanced / best = AV1;
+    # None: the default's choice for each input, on its first frame (lfstream.codec.rate.choose_default)
+    preset: str | None = None
     residual: int | None = None  # quality of the residual layer (lfstream.codec.residual); None: none
+    residual_mode: str = "prediction"  # what the residual codes (lfstream.codec.residual.RESIDUAL_MODES)
 
     def __post_init__(self) -> None:
         from lfstream.codec.encoder import PRESETS
-        from lfstream.codec.residual import check_residual_quality
+        from lfstream.codec.residual import check_residual_mode, check_residual_quality
 
-        if self.preset not in PRESETS:
+        if self.preset is not None and self.preset not in PRESETS:
             raise LFValueError(f"preset: one of {', '.join(PRESETS)}, got {self.preset!r}")
         if self.residual is not None:
             check_residual_quality(self.residual)
+        check_residual_mode(self.residual_mode)
+
+    def for_input(self, first: np.ndarray, present: np.ndarray | None = None) -> EncodeOptions:
+        """These options with the preset (and, where the default codes the views, the residual)
+        fixed for an input whose first frame is ``first``: what ``lfstream encode`` chooses."""
+        from dataclasses import replace
+
+        if self.preset is not None:
+            return self
+        if not self.depth_hint or self.residual is not None:
+            return replace(self, preset="fast")
+        from lfstream.codec.rate import choose_default
+
+        enc = choose_default(first, self.quality, present).encoder
+        return replace(self, preset=enc.preset, depth_hint=enc.depth_hint, residual=enc.residual,
+                       residual_mode=enc.residual_mode)
 
     def encoder(self):
         """A fresh :class:`~lfstream.codec.encoder.Encoder` with these options."""
         from lfstream.codec.encoder import Encoder
 
-        return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset, residual=self.residual)
+        if self.preset is None:
+            raise LFValueError("EncodeOptions: the preset is chosen per input (for_input) before encoding")
+        return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset, residual=self.residual,
+                       residual_mode=self.residual_mode)
 
 
 @dataclass(frozen=True)

@@ -200,9 +200,12 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
                 loaded = load_lf(path, read)
                 lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
                 fps = loaded.fps or 30.0
-                plans[i] = {"target": target, "views": tuple(lf.shape[1:3]), "size": tuple(lf.shape[3:5]), "fps": fps}
+                # the default's choice (preset, or the views) once per input, on its first frame
+                options = encode.for_input(np.ascontiguousarray(lf[0]), loaded.present)
+                plans[i] = {"target": target, "views": tuple(lf.shape[1:3]), "size": tuple(lf.shape[3:5]), "fps": fps,
+                            "options": options}
                 for a, b in encode_groups(len(lf), group_frames):
-                    jobs.append(_Job(i, encode_group, (np.ascontiguousarray(lf[a:b]), a, fps, encode, loaded.present)))
+                    jobs.append(_Job(i, encode_group, (np.ascontiguousarray(lf[a:b]), a, fps, options, loaded.present)))
             else:
                 try:
                     data = path.read_bytes()
@@ -233,7 +236,7 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
             if mode == "encode":
                 from lfstream.codec.bitstream import pack_header
 
-                header = encode.encoder().header(plan["views"], plan["size"], plan["fps"])
+                header = plan["options"].encoder().header(plan["views"], plan["size"], plan["fps"])
                 with atomic_open(plan["target"]) as fh:
                     fh.write(pack_header(header))
                     for part in parts:

@@ -68,6 +68,15 @@ PREDICTION_FLOOR_DB = 22.0
 #: preset): on a handful of cells the check measures borders, not the scene (a 5x5x40x48 clip
 #: measured 24.5 dB, and 26.0 at 64x96, a scene the warp predicts).
 PREDICTION_CHECK_MIN_CELLS = 16
+#: The default's centre coding by the number of views: (most views, preset). With few views the
+#: centre view is a large share of the stream, and JPEG's intra coding loses to HEVC's. Measured
+#: at q50 against x265 medium at the same size (MPSNR / MSSIM differences), centre crops of the
+#: samples: 3x3 fast -0.67...-2.40 dB / -0.0025...-0.0217 on synthetic, seahorse, bikes,
+#: translucent (dino -1.39 / -0.0235), balanced -0.07 / -0.0038 on dino, best +0.41...+8.21 dB /
+#: +0.0016...+0.0500 (dino +0.63 / +0.0051); 5x5 fast -1.22 / -0.0092 on synthetic (+0.0004...
+#: +0.0077 on seahorse, bikes, translucent), balanced +0.42...+2.16 dB / +0.0050...+0.0589;
+#: 7x7 and up, fast meets x265 medium on every 7x7 sample (bench/codec.py).
+DEFAULT_PRESET_BY_VIEWS = ((9, "best"), (48, "balanced"))
 #: Relative size change per quality step the follower assumes (AV1 centre views measured 3-5 %,
 #: JPEG 1.5-3 % around the qualities rate control picks).
 FOLLOW_STEP_GROWTH = 0.04
@@ -145,11 +154,23 @@ def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, prese
     return float(np.mean(psnr(grids[1:, ..., None], pred.astype(np.float32) / np.float32(255.0), 1.0)))
 
 
+def default_preset(views: tuple[int, int], size: tuple[int, int]) -> str:
+    """The default's preset for ``views`` ``(U, V)`` of ``size`` ``(H, W)``
+    (:data:`DEFAULT_PRESET_BY_VIEWS`; ``fast`` where the views are too small for AV1)."""
+    n = int(views[0]) * int(views[1])
+    if av1_fits(size):
+        for most, preset in DEFAULT_PRESET_BY_VIEWS:
+            if n <= most:
+                return preset
+    return "fast"
+
+
 def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | None = None,
                    hint_options: HintOptions | None = None, gain_grid: int = 4, fps: float = 30.0,
                    views_hint: bool = False, post_filter: bool = True) -> DefaultChoice:
     """The default encode's configuration for a stream whose first frame is ``frame``: the
-    fast preset with the hint, unless its prediction of the views misses by far
+    hint and the centre view coded by :func:`default_preset` (the fast JPEG from 7x7 views
+    up, AV1 with fewer), unless the prediction of the views misses by far
     (:data:`PREDICTION_FLOOR_DB`), then the views coded as one AV1 sequence keyed by the
     centre view (``balanced`` preset, ``views`` at ``quality``; the hint only with
     ``views_hint``). The fast encoder's work on frame 0 is kept (``first``): the check costs
@@ -161,7 +182,8 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
     from lfstream.codec.encoder import Encoder
 
     opts = hint_options or HintOptions()
-    enc = Encoder(quality=quality, depth_hint=True, hint_options=opts, gain_grid=gain_grid, post_filter=post_filter)
+    enc = Encoder(quality=quality, depth_hint=True, hint_options=opts, gain_grid=gain_grid,
+                  preset=default_preset(frame.shape[:2], frame.shape[2:4]), post_filter=post_filter)
     first = enc.encode_frame(frame, 0, 0, present)
     u, v = frame.shape[:2]
     cells = min(frame.shape[2:4]) // enc.last_hint.scale
@@ -437,5 +459,6 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
 
 __all__ = ["RATE_TOLERANCE", "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "FOLLOW_MAX_STEP",
            "FOLLOW_DEADBAND", "FOLLOW_STEP_GROWTH", "PREDICTION_FLOOR_DB", "PREDICTION_CHECK_MIN_CELLS",
+           "DEFAULT_PRESET_BY_VIEWS", "default_preset",
            "RateChoice", "DefaultChoice",
            "choose_configuration", "choose_default", "follow_rate", "prediction_psnr"]

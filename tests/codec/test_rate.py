@@ -167,3 +167,16 @@ def test_cli_encode_reports_the_defaults_check(unpredictable, tmp_path, capsys):
     assert main(["encode", str(src), "-o", str(tmp_path / "fast.lfs"), "--preset", "fast", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["residual"] is None and "prediction_db" not in out
+
+
+def test_the_defaults_centre_coding_follows_the_number_of_views():
+    """With few views the centre is much of the stream and JPEG loses to HEVC's intra coding:
+    AV1 below 7x7 (best up to 3x3), JPEG from 7x7; views too small for AV1 keep JPEG."""
+    from lfstream.codec.rate import default_preset
+
+    assert default_preset((3, 3), (512, 512)) == "best" and default_preset((1, 9), (64, 64)) == "best"
+    assert default_preset((5, 5), (500, 500)) == "balanced" and default_preset((6, 8), (64, 64)) == "balanced"
+    assert default_preset((7, 7), (375, 540)) == "fast" and default_preset((9, 9), (240, 320)) == "fast"
+    assert default_preset((3, 3), (2, 17)) == "fast"
+    lf = synth_clip(1, 3, (64, 96), seed=4, noise=1.0, motion=0, camera_pan=0).lf[0]
+    assert lfstream.encode(lf) == lfstream.encode(lf, preset="best")

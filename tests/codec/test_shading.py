@@ -95,7 +95,7 @@ def test_truncated_delta_payloads_are_bitstream_errors(shaded_gains, cut):
 
 def test_a_video_sends_deltas_and_a_lost_one_falls_back():
     clip = synth_clip(4, 5, (64, 96), seed=9, vignetting=0.6, motion=1.0, camera_pan=0.3).lf
-    header, packets = split_stream(lfstream.encode(clip, quality=80))
+    header, packets = split_stream(lfstream.encode(clip, quality=80, preset="fast"))
     assert [p.gain[0] for p in packets] == [VERSION] + [VERSION_DELTA] * 3
     dec = Decoder(header)
     full = [dec.decode_packet(p).lf for p in packets]

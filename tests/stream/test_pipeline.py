@@ -234,14 +234,15 @@ def test_plane_videos_play_everywhere_and_lossless_is_an_option(tmp_path):
 
     frames = list(synthetic_source(frames=2, views=3, size=(33, 47), seed=4))
     out = prepare_output_dir(tmp_path / "lossy")
-    Pipeline(iter(frames), StreamConfig(refocus="sas", save=("mp4",), metrics=False), out).run()
+    Pipeline(iter(frames), StreamConfig(refocus="sas", save=("mp4",), metrics=False, preset="fast"), out).run()
     with av.open(str(out / "plane_00.mp4")) as c:
         s = c.streams.video[0]
         assert s.codec_context.pix_fmt == "yuv420p" and "4:4:4" not in (s.codec_context.profile or "")
     got = list(iter_video_frames(out / "plane_00.mp4"))
     assert len(got) == 2 and got[0].shape == (33, 47, 3)
     out2 = prepare_output_dir(tmp_path / "lossless")
-    Pipeline(iter(frames), StreamConfig(refocus="sas", alphas="seed", save=("mp4-lossless",), metrics=False), out2).run()
+    Pipeline(iter(frames), StreamConfig(refocus="sas", alphas="seed", save=("mp4-lossless",), metrics=False, preset="fast"),
+             out2).run()
     from lfstream.refocus import focal_stack
 
     exact = focal_stack(Decoder(Encoder().header((3, 3), (33, 47), 30.0)).decode_packet(
