@@ -310,9 +310,10 @@ def encode(
     (:mod:`lfstream.codec.rate`) picks the quality, whether to send the hint and, unless
     ``preset`` names one, the preset, and whether and how well to code the residual layer.
     ``preset``: the centre view's coding (:data:`PRESETS`). ``None`` (the default, with the
-    hint and no residual named): ``fast``, the seed's JPEG and hint, unless the first frame
-    shows that warping cannot predict the scene; then the views are coded as one AV1
-    sequence keyed by the centre view (:func:`lfstream.codec.rate.choose_default`). A named
+    hint and no residual named): chosen per stream (:func:`lfstream.codec.rate.choose_default`):
+    ``fast``, the seed's JPEG, from 7x7 views up, an AV1 centre with fewer views
+    (:func:`lfstream.codec.rate.default_preset`), and the views coded as one AV1 sequence
+    keyed by the centre view where the first frame shows that warping cannot predict them. A named
     preset is used as it is. ``residual``: quality 1..100 of the residual layer (:mod:`lfstream.codec.residual`),
     ``None`` (the default) for none; ``residual_mode``: what it codes (``prediction`` or
     ``views``, :attr:`Encoder.residual_mode`). ``post_filter``: name the decoder's JPEG
