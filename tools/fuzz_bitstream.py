@@ -65,8 +65,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cases", type=int, default=20000)
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
-    streams = [encode(synth_clip(3, 5, (40, 48), seed=1).lf, quality=60),
-               encode(synth_clip(2, 3, (32, 32), seed=2, vignetting=0.6).lf, depth_hint=True),
+    streams = [encode(synth_clip(3, 5, (40, 48), seed=1).lf, quality=60, preset="fast"),
+               encode(synth_clip(2, 3, (32, 32), seed=2, vignetting=0.6).lf, depth_hint=True, preset="fast"),
                encode(synth_clip(1, 3, (32, 32), seed=4).lf, residual=50),  # a residual layer
                # the views as one AV1 sequence keyed by the centre payload
                encode(synth_clip(1, 3, (32, 32), seed=5).lf, preset="balanced", quality=50, residual=50,

@@ -208,7 +208,9 @@ def decoded_parts(lf: np.ndarray, present: np.ndarray | None, quality: int, hint
     from lfstream.codec.decoder import iter_decode
     from lfstream.codec.hint import HintOptions
 
-    data = lfstream.encode(lf, quality=quality, present=present, hint_options=HintOptions(hint_scale=hint_scale))
+    # the JPEG centre the networks restore (the default codes grids under 7x7 with AV1)
+    data = lfstream.encode(lf, quality=quality, present=present, hint_options=HintOptions(hint_scale=hint_scale),
+                           preset="fast")
     return next(iter_decode(io.BytesIO(data), hance="off"))
 
 
