@@ -50,8 +50,10 @@ class StreamConfig:
     depth_hint: bool = True
     # a target size in bits per pixel: rate control picks quality and hint on the first frame
     bpp: float | None = None
-    # the centre view's coding (lfstream.codec.encoder.PRESETS); None: "fast", or with bpp
-    # every preset is a rate-control candidate
+    # the centre view's coding (lfstream.codec.encoder.PRESETS); None: the default's choice on
+    # the first frame (lfstream.codec.rate.choose_default: fast from 7x7 views, AV1 with fewer,
+    # the views themselves where warping cannot predict them), or with bpp every preset is a
+    # rate-control candidate
     preset: str | None = None
     # quality of the residual layer (lfstream.codec.residual); None: none (with bpp, rate
     # control decides)

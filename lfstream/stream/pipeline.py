@@ -196,6 +196,7 @@ class Pipeline:
             frames=self.stats["sink"].frames if self.sender is None else self.stats["encoder"].frames,
             stages=self.stats,
             rate=encoder.rate if encoder is not None else RateStats(),
+            coding=encoder.coding() if encoder is not None else None,
             quality=metrics.quality if metrics is not None else QualityStats(),
             static=decoder.static if decoder is not None else StaticSkipStats(enabled=cfg.skip_static),
             planes=refocuser.skips if refocuser is not None else PlaneSkipStats(enabled=cfg.skip_planes),

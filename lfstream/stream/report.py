@@ -91,7 +91,7 @@ def build_summary(*, wall_s: float, warmup_s: float = 0.0, frames: int, stages: 
                   quality: QualityStats, static: StaticSkipStats, planes: PlaneSkipStats,
                   receive: dict | None, transport: str, refocus: dict | None, hance: dict,
                   interrupted: bool, outputs: list[str], focal_planes: list[dict] | None = None,
-                  plane_updates: list[dict] | None = None) -> dict:
+                  plane_updates: list[dict] | None = None, coding: dict | None = None) -> dict:
     """The summary a run returns and writes as ``summary.json`` (keys are a contract)."""
     out = {
         "frames": frames,
@@ -101,6 +101,8 @@ def build_summary(*, wall_s: float, warmup_s: float = 0.0, frames: int, stages: 
         "warmup_s": round(warmup_s, 3),
         "bpp": (rate.bytes * 8 / rate.pixels) if rate.pixels else None,
         "bytes": rate.bytes,
+        # what the encoder coded (the default chooses on the first frame: lfstream.codec.rate)
+        "coding": coding,
         "mpsnr": float(np.mean([p for _, p in quality.mpsnr])) if quality.mpsnr else None,
         "mssim": float(np.mean([s for _, s in quality.mssim])) if quality.mssim else None,
         "per_frame": [{"frame": k, "mpsnr": round(p, 4)} for k, p in quality.mpsnr],

@@ -239,6 +239,14 @@ class EncoderStage(ConsumerStage):
                       self.encoder.quality)
         return packet
 
+    def coding(self) -> dict:
+        """What the stream's encoder codes (the summary's ``coding``): preset, quality, hint,
+        residual layer, and the default's check of its prediction (``prediction_db``)."""
+        enc = self.encoder
+        return {"preset": enc.preset, "quality": int(enc.quality), "depth_hint": bool(enc.depth_hint),
+                "residual": enc.residual, "residual_mode": enc.residual_mode if enc.residual is not None else None,
+                "prediction_db": None if self.prediction_db is None else round(float(self.prediction_db), 3)}
+
     def forward(self, packet: Packet) -> bool:
         return self.channel.send(packet, self.control.stop_event)
 

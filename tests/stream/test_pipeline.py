@@ -42,6 +42,10 @@ def test_transports_agree_and_outputs_are_valid(tmp_path, transport):
     assert summary["frames"] == 4 and summary["lost"] == 0
     assert summary["mpsnr"] == ref["mpsnr"] and summary["mssim"] == ref["mssim"]
     assert summary["mpsnr"] > 20 and 0 < summary["bpp"] < 1
+    # what the default chose for a 5x5 grid of 48x64 views: an AV1 centre; too few hint
+    # cells for the check of its prediction (lfstream.codec.rate.choose_default)
+    assert summary["coding"] == {"preset": "balanced", "quality": 50, "depth_hint": True, "residual": None,
+                                 "residual_mode": None, "prediction_db": None}
     # the summary's figures are consistent with what was streamed, not merely present
     assert summary["fps"] == pytest.approx(summary["frames"] / summary["wall_s"], rel=0.01)
     assert summary["mssim_frames"] == [0, 1, 2, 3] and 0.5 < summary["mssim"] <= 1
@@ -300,3 +304,14 @@ def test_a_run_stopped_before_its_stages_reports_the_same_keys(tmp_path):
     stopped = stopped_summary("inproc")
     assert set(stopped) == set(full) and stopped["interrupted"] is True and stopped["frames"] == 0
     json.dumps(stopped, allow_nan=False)  # strict JSON too
+
+
+def test_the_stream_codes_the_views_where_warping_cannot_predict_them(unpredictable):
+    """The stream's default makes the encoder's choice on its first frame: views no
+    disparity explains are coded as one AV1 sequence (the hint still sent, for the focal
+    planes), and the summary says so."""
+    frames = [unpredictable, unpredictable]
+    summary = Pipeline(iter(frames), StreamConfig(refocus="sas", save=(), mssim_every=1), None).run()
+    coding = summary["coding"]
+    assert coding["preset"] == "balanced" and coding["residual_mode"] == "views" and coding["depth_hint"]
+    assert coding["prediction_db"] < 22.0 and summary["mpsnr"] > 30.0, summary["mpsnr"]
