@@ -4,7 +4,8 @@ For every scene (the synthetic clip's first frame and every sample in ../shared/
 HCI "star" scenes as their centre 3x3, the only complete square of views they have):
 
 - lfstream's presets (fast = JPEG, balanced / best = AV1 centre view; all with the depth
-  hint) over a sweep of qualities, and lfstream's rate control (``encode(lf, bpp=T)``, every
+  hint) and its default (no preset named: the encoder's choice per scene) over a sweep of
+  qualities, and lfstream's rate control (``encode(lf, bpp=T)``, every
   preset and hint precision considered) at targets T from 0.005 to 0.1 bpp;
 - x265 preset medium and preset ultrafast, and SVT-AV1 (presets 8 and 4), each coding the views as
   one pseudo-sequence (raster order, one key frame) over a sweep of constant QP / CRF.
@@ -46,7 +47,8 @@ BASELINES = {  # method -> (codec, preset, parameters)
     # modes add over it
     "SVT-AV1 p4": ("av1", "4", (20, 30, 40, 50, 60)),
 }
-PRESETS = ("fast", "balanced", "best")
+# None: the default (no preset named: lfstream.codec.rate.choose_default picks per scene)
+PRESETS = ("fast", "balanced", "best", None)
 
 
 def scenes(quick: bool, only: set[str] | None) -> list[tuple[str, np.ndarray]]:
@@ -74,7 +76,7 @@ def _point(lf: np.ndarray, data: bytes, rec: np.ndarray, param, enc_s: float, de
             "mssim": float(mssim(lf, rec)), "encode_s": enc_s, "decode_s": dec_s}
 
 
-def lfstream_curve(lf: np.ndarray, preset: str, quick: bool) -> list[dict]:
+def lfstream_curve(lf: np.ndarray, preset: str | None, quick: bool) -> list[dict]:
     pts = []
     for q in QUALITIES[::2] if quick else QUALITIES:
         lfstream.encode(lf, quality=q, preset=preset)  # warm (kernels, codec libraries)
@@ -179,7 +181,7 @@ def main(argv=None) -> dict:
     only = set(args.scenes.split(",")) if args.scenes else None
     results = []
     for name, lf in scenes(args.quick, only):
-        curves = {} if args.skip_presets else {f"lfstream {preset}": lfstream_curve(lf, preset, args.quick)
+        curves = {} if args.skip_presets else {f"lfstream {preset or 'default'}": lfstream_curve(lf, preset, args.quick)
                                                for preset in PRESETS}
         curves["lfstream --bpp (rate control)"] = rate_control_curve(lf, args.quick)
         for method, (codec, preset, params) in BASELINES.items():
