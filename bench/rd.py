@@ -135,7 +135,7 @@ def plot(scene: str, curves: dict[str, list[dict]], path: Path) -> None:
     """MPSNR and MSSIM against log bpp, one line per method, drawn with OpenCV."""
     w, h, m = 760, 520, 64
     colours = [(200, 60, 20), (20, 140, 20), (20, 20, 200), (160, 20, 160), (0, 0, 0), (0, 140, 200), (120, 120, 0),
-               (30, 130, 255)]
+               (30, 130, 255), (128, 128, 128), (0, 70, 140)]  # BGR, one per method
     panels = []
     pts = [p for c in curves.values() for p in c if 0.002 <= p["bpp"] <= 0.2]
     x0, x1 = np.log10(min(p["bpp"] for p in pts)), np.log10(max(p["bpp"] for p in pts))
