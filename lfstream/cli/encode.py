@@ -23,9 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target size in bits per pixel: rate control picks the "
                       "preset (unless --preset), quality, hint and hint precision (best first-frame MPSNR within 15 %%)")
     p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG), balanced "
-                   "(AV1, SVT preset 12), best (AV1, SVT preset 8). Default: fast, unless the first frame shows "
-                   "that warping cannot predict the views (then the views as one AV1 sequence, balanced); with "
-                   "--bpp, the default is to try all three")
+                   "(AV1, SVT preset 12), best (AV1, SVT preset 8). Default: fast from 7x7 views up, balanced "
+                   "below, best up to 3x3, and the views as one AV1 sequence where the first frame shows that "
+                   "warping cannot predict them; with --bpp, the default is to try all three")
     p.add_argument("--residual", type=int_in(QUALITY_RANGE), metavar="Q",
                    help="quality 1..100 of the residual layer: every view's prediction "
                    "error coded as one AV1 sequence "
@@ -74,11 +74,12 @@ def run(args: argparse.Namespace) -> int:
         stats = write_stream_file(args.output, rate.header, rate.packets)
         stats.encode_s = time.perf_counter() - t0  # the search included
     elif args.preset is None and depth_hint and residual is None:
-        # the default: the fast preset, unless its prediction misses the views (then the views)
+        # the default: the centre's coding by the number of views, or the views themselves
+        # where the prediction misses them (rate.choose_default)
         from lfstream.codec.rate import choose_default
 
         t0 = time.perf_counter()
-        choice = choose_default(frames[0], quality, loaded.present, fps=fps)
+        choice = choose_default(frames[0], quality, loaded.present)
         first_s = time.perf_counter() - t0
         enc = choice.encoder
         preset, depth_hint, residual, residual_mode = enc.preset, enc.depth_hint, enc.residual, enc.residual_mode

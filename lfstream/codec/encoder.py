@@ -343,7 +343,7 @@ def encode(
         from lfstream.codec.rate import choose_default
 
         check_lf(frames[0], allow_video=False)
-        choice = choose_default(frames[0], quality, present, hint_options, gain_grid, fps, post_filter=post_filter)
+        choice = choose_default(frames[0], quality, present, hint_options, gain_grid, post_filter=post_filter)
         enc, first = choice.encoder, choice.first
     else:
         enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(),

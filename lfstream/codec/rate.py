@@ -22,8 +22,9 @@ A stream sees one frame at a time: it chooses on its first frame and then follow
 budget frame by frame (:func:`follow_rate`).
 
 Without a target (the default encode: no ``bpp``, no preset named) the choice is cheaper:
-:func:`choose_default` codes the first frame the fast way (JPEG centre view and hint) and
-checks, at the hint's resolution, how well the centre view and the hint predict the outer
+:func:`choose_default` codes the first frame with the hint, its centre view by the number
+of views (:func:`default_preset`: JPEG from 7x7 views up, AV1 with fewer), and checks, at the
+hint's resolution, how well the centre view and the hint predict the outer
 views (:func:`prediction_psnr`); where they miss by far (a camera array whose views are
 tens of pixels apart, a rig that is not a grid) no warp can carry the scene, and the
 stream codes the views themselves instead (``views``, the ``balanced`` preset: one AV1
@@ -166,8 +167,8 @@ def default_preset(views: tuple[int, int], size: tuple[int, int]) -> str:
 
 
 def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | None = None,
-                   hint_options: HintOptions | None = None, gain_grid: int = 4, fps: float = 30.0,
-                   views_hint: bool = False, post_filter: bool = True) -> DefaultChoice:
+                   hint_options: HintOptions | None = None, gain_grid: int = 4, views_hint: bool = False,
+                   post_filter: bool = True) -> DefaultChoice:
     """The default encode's configuration for a stream whose first frame is ``frame``: the
     hint and the centre view coded by :func:`default_preset` (the fast JPEG from 7x7 views
     up, AV1 with fewer), unless the prediction of the views misses by far

@@ -214,7 +214,7 @@ class EncoderStage(ConsumerStage):
             # sent either way (the focal planes are fitted to the decoded disparity)
             from lfstream.codec.rate import choose_default
 
-            choice = choose_default(lf, self.config.quality, self.present, fps=self.config.fps, views_hint=True)
+            choice = choose_default(lf, self.config.quality, self.present, views_hint=True)
             self.encoder, first = choice.encoder, choice.first
             self.prediction_db = choice.prediction_db
         pixels = int(np.prod(lf.shape[:4]))
