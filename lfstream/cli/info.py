@@ -40,7 +40,28 @@ def describe(loaded) -> dict:
     if loaded.disparity is not None:
         d = loaded.disparity
         out["disparity_range"] = [float(d.min()), float(d.max())]
+    if loaded.format == "lfs":
+        out["stream"] = describe_stream(Path(loaded.path), loaded.frames)
     return out
+
+
+def describe_stream(path: Path, frames: int) -> dict:
+    """What an ``.lfs`` file's header says it carries: format version, the centre view's
+    codec and preset, quality, depth hint, residual layer (quality and mode), file bytes and
+    bits per pixel of the light field."""
+    from lfstream.codec.bitstream import CODEC_NAMES, read_header
+
+    with open(path, "rb") as fh:
+        header = read_header(fh)
+    u, v = header.views
+    h, w = header.size
+    size = path.stat().st_size
+    residual = header.meta.get("residual") if header.has_residual else None
+    return {"version": header.version, "centre_codec": CODEC_NAMES[header.codec],
+            "preset": header.meta.get("preset", "fast"), "quality": header.quality, "depth_hint": header.has_hint,
+            "residual": None if residual is None else residual.get("quality"),
+            "residual_mode": None if residual is None else residual.get("mode", "prediction"),
+            "file_bytes": size, "bpp": 8.0 * size / max(frames * u * v * h * w, 1)}
 
 
 def _text(info: dict) -> str:
@@ -59,6 +80,12 @@ def _text(info: dict) -> str:
     if info["has_disparity"]:
         lo, hi = info["disparity_range"]
         lines.append(f"  disparity ground truth, {lo:.3f} .. {hi:.3f} px/view")
+    s = info.get("stream")
+    if s:
+        layers = (" + hint" if s["depth_hint"] else "") + (
+            f" + residual q{s['residual']} ({s['residual_mode']})" if s["residual"] is not None else "")
+        lines.append(f"  stream  .lfs version {s['version']}, {s['preset']} ({s['centre_codec']} centre) q{s['quality']}"
+                     f"{layers}; {s['file_bytes']} bytes, {s['bpp']:.5f} bpp")
     return "\n".join(lines)
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from lfstream.cli import build_parser, main
+from lfstream.synth import synth_clip
 from tests.conftest import random_lf, shared
 
 
@@ -323,3 +324,20 @@ def test_stream_runs_opencv_single_threaded_and_restores_it(capsys, tmp_path, mo
         assert cv2.getNumThreads() == 2  # and the process's setting comes back
     finally:
         cv2.setNumThreads(before)
+
+
+def test_info_on_a_stream_says_what_it_carries(capsys, tmp_path):
+    """``lfstream info`` on an .lfs file reports the header's codec, preset, layers and size."""
+    import lfstream
+
+    lf = synth_clip(2, 7, (64, 96), seed=2, noise=1.0).lf
+    data = lfstream.encode(lf, quality=40)
+    (tmp_path / "a.lfs").write_bytes(data)
+    assert main(["info", str(tmp_path / "a.lfs"), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)["stream"]
+    assert s == {"version": 1, "centre_codec": "jpeg", "preset": "fast", "quality": 40, "depth_hint": True,
+                 "residual": None, "residual_mode": None, "file_bytes": len(data),
+                 "bpp": pytest.approx(8 * len(data) / (2 * 7 * 7 * 64 * 96))}
+    (tmp_path / "b.lfs").write_bytes(lfstream.encode(lf, quality=40, preset="best", residual=30))
+    assert main(["info", str(tmp_path / "b.lfs")]) == 0
+    assert "version 3, best (av1 centre) q40 + hint + residual q30 (prediction)" in capsys.readouterr().out
