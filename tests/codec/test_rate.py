@@ -180,3 +180,19 @@ def test_the_defaults_centre_coding_follows_the_number_of_views():
     assert default_preset((3, 3), (2, 17)) == "fast"
     lf = synth_clip(1, 3, (64, 96), seed=4, noise=1.0, motion=0, camera_pan=0).lf[0]
     assert lfstream.encode(lf) == lfstream.encode(lf, preset="best")
+
+
+def test_the_default_keeps_the_prediction_where_views_are_missing():
+    """A light field with missing views (an HCI "star") is not checked: a coded sequence of
+    the views could not carry the missing ones, the prediction reconstructs them."""
+    from lfstream.codec.rate import choose_default
+
+    lf = synth_clip(1, 9, (64, 96), seed=6, noise=1.0, motion=0, camera_pan=0).lf[0]
+    present = np.zeros((9, 9), bool)
+    present[4, :] = present[:, 4] = True
+    present[np.arange(9), np.arange(9)] = present[np.arange(9), 8 - np.arange(9)] = True
+    choice = choose_default(lf, present=present)
+    assert choice.prediction_db is None and not choice.codes_views and choice.encoder.preset == "fast"
+    data = lfstream.encode(lf, present=present)
+    assert data == lfstream.encode(lf, present=present, preset="fast")
+    assert lfstream.decode(data)[0].shape == lf.shape
