@@ -119,6 +119,12 @@ def _text(summary: dict, out: Path | None) -> str:
              + f", lost {summary['lost']}" + (" (interrupted)" if summary.get("interrupted") else "")]
     for name, s in summary.get("stages", {}).items():
         lines.append(f"  {name:9s} {s['frames']:5d} frames  {s['ms_per_frame'] or 0:8.1f} ms/frame")
+    c = summary.get("coding")
+    if c:
+        lines.append(f"  coding: {c['preset']} q{c['quality']}" + (" + hint" if c["depth_hint"] else "")
+                     + (f" + residual q{c['residual']} ({c['residual_mode']})" if c["residual"] is not None else "")
+                     + (f"; the prediction checked at {c['prediction_db']:.1f} dB" if c.get("prediction_db") is not None
+                        else ""))
     if summary.get("refocus"):
         lines.append(f"  refocus: {summary['refocus']['method']} ({summary['refocus']['why']})")
     if out is not None:

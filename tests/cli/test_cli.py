@@ -341,3 +341,16 @@ def test_info_on_a_stream_says_what_it_carries(capsys, tmp_path):
     (tmp_path / "b.lfs").write_bytes(lfstream.encode(lf, quality=40, preset="best", residual=30))
     assert main(["info", str(tmp_path / "b.lfs")]) == 0
     assert "version 3, best (av1 centre) q40 + hint + residual q30 (prediction)" in capsys.readouterr().out
+
+
+def test_the_stream_summary_text_says_what_was_coded():
+    from lfstream.cli._pipeline import _text
+
+    summary = {"frames": 1, "fps": 1.0, "bpp": 0.28, "mpsnr": 32.9, "mssim": 0.947, "lost": 0, "stages": {},
+               "coding": {"preset": "balanced", "quality": 50, "depth_hint": True, "residual": 50,
+                          "residual_mode": "views", "prediction_db": 18.99}}
+    text = _text(summary, None)
+    assert "coding: balanced q50 + hint + residual q50 (views); the prediction checked at 19.0 dB" in text
+    summary["coding"] = {"preset": "fast", "quality": 50, "depth_hint": True, "residual": None, "residual_mode": None,
+                         "prediction_db": None}
+    assert "coding: fast q50 + hint\n" in _text(summary, None) + "\n"
