@@ -105,6 +105,13 @@ def load_from_args(args: argparse.Namespace):
     return load_lf(args.input, read_options(args))
 
 
+def coding_layers(depth_hint: bool, residual: int | None, residual_mode: str | None) -> str:
+    """The layers of a stream beside its centre view, as the text outputs print them:
+    `` + hint + residual q40 (views)``."""
+    return (" + hint" if depth_hint else "") + (f" + residual q{residual} ({residual_mode})" if residual is not None
+                                                else "")
+
+
 def _json_default(o: object):
     if isinstance(o, (np.floating, np.integer)):
         return o.item()

@@ -8,7 +8,7 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-from lfstream.cli._common import emit, float_in, int_in, parse_float_list
+from lfstream.cli._common import coding_layers, emit, float_in, int_in, parse_float_list
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
 from lfstream.stream.config import BATCH_RANGE, FOCUS_MODES, QUEUE_RANGE, REFOCUS_MODES, SAVE_KINDS, StreamConfig
 
@@ -121,8 +121,8 @@ def _text(summary: dict, out: Path | None) -> str:
         lines.append(f"  {name:9s} {s['frames']:5d} frames  {s['ms_per_frame'] or 0:8.1f} ms/frame")
     c = summary.get("coding")
     if c:
-        lines.append(f"  coding: {c['preset']} q{c['quality']}" + (" + hint" if c["depth_hint"] else "")
-                     + (f" + residual q{c['residual']} ({c['residual_mode']})" if c["residual"] is not None else "")
+        lines.append(f"  coding: {c['preset']} q{c['quality']}"
+                     + coding_layers(c["depth_hint"], c["residual"], c["residual_mode"])
                      + (f"; the prediction checked at {c['prediction_db']:.1f} dB" if c.get("prediction_db") is not None
                         else ""))
     if summary.get("refocus"):

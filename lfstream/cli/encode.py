@@ -48,6 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lfstream.codec.encoder import Encoder, encode_file, frames_of, write_stream_file
+    from lfstream.codec.rate import choose_default, uses_default_choice
     from lfstream.errors import LFValueError
     from lfstream.io._fs import check_new_file
     from lfstream.metrics import bpp
@@ -73,11 +74,9 @@ def run(args: argparse.Namespace) -> int:
         residual_mode = rate.residual_mode
         stats = write_stream_file(args.output, rate.header, rate.packets)
         stats.encode_s = time.perf_counter() - t0  # the search included
-    elif args.preset is None and depth_hint and residual is None:
+    elif uses_default_choice(args.preset, depth_hint, residual, residual_mode):
         # the default: the centre's coding by the number of views, or the views themselves
-        # where the prediction misses them (rate.choose_default)
-        from lfstream.codec.rate import choose_default
-
+        # where the prediction misses them
         t0 = time.perf_counter()
         choice = choose_default(frames[0], quality, loaded.present)
         first_s = time.perf_counter() - t0

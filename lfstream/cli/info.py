@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.cli._common import add_read_options, emit, load_from_args
+from lfstream.cli._common import add_read_options, coding_layers, emit, load_from_args
 
 HELP = "describe a light field or LF video: format, frames, views, view size, dtype, bytes"
 
@@ -82,8 +82,7 @@ def _text(info: dict) -> str:
         lines.append(f"  disparity ground truth, {lo:.3f} .. {hi:.3f} px/view")
     s = info.get("stream")
     if s:
-        layers = (" + hint" if s["depth_hint"] else "") + (
-            f" + residual q{s['residual']} ({s['residual_mode']})" if s["residual"] is not None else "")
+        layers = coding_layers(s["depth_hint"], s["residual"], s["residual_mode"])
         lines.append(f"  stream  .lfs version {s['version']}, {s['preset']} ({s['centre_codec']} centre) q{s['quality']}"
                      f"{layers}; {s['file_bytes']} bytes, {s['bpp']:.5f} bpp")
     return "\n".join(lines)

@@ -47,11 +47,12 @@ class EncodeOptions:
         fixed for an input whose first frame is ``first``: what ``lfstream encode`` chooses."""
         from dataclasses import replace
 
+        from lfstream.codec.rate import choose_default, uses_default_choice
+
         if self.preset is not None:
             return self
-        if not self.depth_hint or self.residual is not None:
+        if not uses_default_choice(None, self.depth_hint, self.residual):
             return replace(self, preset="fast")
-        from lfstream.codec.rate import choose_default
 
         enc = choose_default(first, self.quality, present).encoder
         return replace(self, preset=enc.preset, depth_hint=enc.depth_hint, residual=enc.residual,

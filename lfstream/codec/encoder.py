@@ -338,10 +338,10 @@ def encode(
             raise LFValueError("post_filter: rate control (bpp) names the post-filter itself; give one or the other")
         # rate control encoded every frame already: its stream is the answer
         return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream()
-    first = None
-    if preset is None and depth_hint and residual is None and residual_mode == "prediction":
-        from lfstream.codec.rate import choose_default
+    from lfstream.codec.rate import choose_default, uses_default_choice
 
+    first = None
+    if uses_default_choice(preset, depth_hint, residual, residual_mode):
         check_lf(frames[0], allow_video=False)
         choice = choose_default(frames[0], quality, present, hint_options, gain_grid, post_filter=post_filter)
         enc, first = choice.encoder, choice.first

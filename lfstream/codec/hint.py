@@ -341,9 +341,12 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int) ->
     return a.astype(np.float32), bool(better and shift >= _AXES_MIN_SHIFT)
 
 
-def _axes_views(keys: list[tuple[int, int]], centre: tuple[int, int]) -> list[int]:
-    """Which sweep views the axes detection uses: those on the centre's row and column
-    (pure steps along one axis) where each axis of the grid has one, else all."""
+def _axes_views(keys: list[tuple[int, int]], u: int, v: int, present: np.ndarray | None) -> list[int]:
+    """Which sweep views (:func:`sweep_views`) the axes detection uses: of the outer ring
+    (the longest flows, and the fit it was tuned on), those on the centre's row and column
+    (pure steps along one axis) where each axis of the grid has one, else the whole ring."""
+    centre = (u // 2, v // 2)
+    keys = keys[: len(_ring_views(u, v, present))]  # sweep_views puts the ring first
     on_axis = [j for j, (a, b) in enumerate(keys) if (a == centre[0]) != (b == centre[1])]
     u_ok = any(keys[j][0] != centre[0] for j in on_axis) or all(a == centre[0] for a, _ in keys)
     v_ok = any(keys[j][1] != centre[1] for j in on_axis) or all(b == centre[1] for _, b in keys)
@@ -384,8 +387,8 @@ def estimate_view_axes(lf: np.ndarray, present: np.ndarray | None = None,
     if not keys:
         return np.eye(2, dtype=np.float32)
     steps = np.asarray([(a - centre[0], b - centre[1]) for a, b in keys], np.float64)
-    use = _axes_views(keys[: len(_ring_views(u, v, present))], centre)
-    return _detect_axes(_grids(frame, [centre, *keys], work_scale), steps, use, work_scale)
+    return _detect_axes(_grids(frame, [centre, *keys], work_scale), steps, _axes_views(keys, u, v, present),
+                        work_scale)
 
 
 def scene_range(disparity: np.ndarray, margin: float) -> tuple[float, float]:
@@ -428,8 +431,7 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     if axes is None:
         axes = identity
         if options.geometry == "auto":
-            # the axes from the outer ring alone: the longest flows, and the fit it was tuned on
-            axes = _detect_axes(grids, steps, _axes_views(keys[: len(_ring_views(u, v, present))], centre), work)
+            axes = _detect_axes(grids, steps, _axes_views(keys, u, v, present), work)
     axes = np.asarray(axes, np.float32)
     rows, cols = np.asarray(keys).T
     grid_offsets = view_offsets((u, v), axes)

@@ -166,6 +166,13 @@ def default_preset(views: tuple[int, int], size: tuple[int, int]) -> str:
     return "fast"
 
 
+def uses_default_choice(preset: str | None, depth_hint: bool, residual: int | None,
+                        residual_mode: str = "prediction") -> bool:
+    """Whether an encode is the default one :func:`choose_default` configures: no preset
+    named, the hint on, no residual layer asked for (and no target: rate control's is its own)."""
+    return preset is None and bool(depth_hint) and residual is None and residual_mode == "prediction"
+
+
 def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | None = None,
                    hint_options: HintOptions | None = None, gain_grid: int = 4, views_hint: bool = False,
                    post_filter: bool = True) -> DefaultChoice:
@@ -462,4 +469,4 @@ __all__ = ["RATE_TOLERANCE", "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_P
            "FOLLOW_DEADBAND", "FOLLOW_STEP_GROWTH", "PREDICTION_FLOOR_DB", "PREDICTION_CHECK_MIN_CELLS",
            "DEFAULT_PRESET_BY_VIEWS", "default_preset",
            "RateChoice", "DefaultChoice",
-           "choose_configuration", "choose_default", "follow_rate", "prediction_psnr"]
+           "choose_configuration", "choose_default", "uses_default_choice", "follow_rate", "prediction_psnr"]

@@ -121,8 +121,7 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray | None, quality: int,
     Shape:
         - lf, prediction: ``(U, V, H, W, 3)``
     """
-    check_residual_quality(quality)
-    CentreCoding("av1", speed)  # the same SVT-AV1 preset range as the centre view's
+    _check_coding(quality, speed)
     fmt = RESIDUAL_FORMAT
     if half and prediction is not None:
         raise LFValueError("residual: half size is a mode of the views, not of a prediction's error")
@@ -141,9 +140,7 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray | None, quality: int,
         raise LFValueError(f"residual: lf {lf.shape} {lf.dtype} and prediction {prediction.shape} {prediction.dtype} "
                            "must be uint8 of one shape")
     u, v, h, w, _ = lf.shape
-    order = residual_views((u, v))
-    if not order:
-        raise LFValueError("residual: a single-view light field has nothing to correct")
+    order = _coded_order((u, v))
 
     def frame_at(k: int) -> np.ndarray:
         a, b = order[k]
@@ -151,6 +148,21 @@ def encode_residual(lf: np.ndarray, prediction: np.ndarray | None, quality: int,
 
     packets = _encode_sequence(frame_at, len(order), (h, w), quality, speed, "AV1 residual sequence")
     return _payload(fmt, len(order), packets)
+
+
+def _check_coding(quality: int, speed: int) -> None:
+    """A residual layer's quality and SVT-AV1 preset (the same preset range as the centre
+    view's AV1 coding), else LFValueError."""
+    check_residual_quality(quality)
+    CentreCoding("av1", speed)
+
+
+def _coded_order(views: tuple[int, int]) -> list[tuple[int, int]]:
+    """:func:`residual_views`, refusing a single-view light field (nothing to code)."""
+    order = residual_views(views)
+    if not order:
+        raise LFValueError("residual: a single-view light field has nothing to correct")
+    return order
 
 
 def _payload(fmt: int, frames: int, packets: list[bytes]) -> bytes:
@@ -195,15 +207,11 @@ def encode_views_keyed(lf: np.ndarray, quality: int, speed: int) -> tuple[bytes,
     Shape:
         - lf: ``(U, V, H, W, 3)``
     """
-    check_residual_quality(quality)
-    CentreCoding("av1", speed)
+    _check_coding(quality, speed)
     if lf.dtype != np.uint8 or lf.ndim != 5:
         raise LFValueError(f"residual: lf must be (U, V, H, W, 3) uint8, got {lf.shape} {lf.dtype}")
     u, v, h, w, _ = lf.shape
-    order = residual_views((u, v))
-    if not order:
-        raise LFValueError("residual: a single-view light field has nothing to correct")
-    order = [(u // 2, v // 2), *order]
+    order = [(u // 2, v // 2), *_coded_order((u, v))]
     packets = _encode_sequence(lambda k: lf[order[k]], len(order), (h, w), quality, speed, "AV1 views sequence")
     if len(packets) < 2:  # pragma: no cover - SVT-AV1 emits one packet per shown frame
         raise LFValueError("AV1 views sequence: the encoder emitted a single packet")

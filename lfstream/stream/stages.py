@@ -20,6 +20,7 @@ import numpy as np
 from lfstream.codec.bitstream import Packet
 from lfstream.codec.decoder import DecodedFrame, Decoder
 from lfstream.codec.encoder import Encoder
+from lfstream.codec.rate import choose_configuration, choose_default, uses_default_choice
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.stream.config import StreamConfig
 from lfstream.stream.frames import SourceFrame, StackFrame
@@ -198,9 +199,7 @@ class EncoderStage(ConsumerStage):
     def work(self, item: SourceFrame) -> Packet:
         lf = item.lf
         if not self.started and self.config.bpp is not None:
-            # rate control on the first frame: the quality and hint the whole stream uses
-            from lfstream.codec.rate import choose_configuration
-
+            # rate control on the first frame: the quality and hint the whole stream uses;
             # views_hint: the focal planes are fitted to the decoded disparity
             choice = choose_configuration(lf[None], self.config.bpp, self.config.fps, self.present,
                                           preset=self.config.preset, views_hint=True)
@@ -208,12 +207,12 @@ class EncoderStage(ConsumerStage):
                                    hint_options=choice.hint_options, residual=choice.residual,
                                    residual_mode=choice.residual_mode)
         first = None
-        if not self.started and self.config.bpp is None and self.config.preset is None and self.config.depth_hint \
-                and self.config.residual is None:
-            # the default: the fast preset, unless its prediction misses the views; the hint is
-            # sent either way (the focal planes are fitted to the decoded disparity)
-            from lfstream.codec.rate import choose_default
-
+        cfg = self.config
+        if not self.started and cfg.bpp is None and uses_default_choice(cfg.preset, cfg.depth_hint, cfg.residual,
+                                                                        cfg.residual_mode):
+            # the default's choice on the first frame (the centre's coding by the number of
+            # views, or the views themselves); the hint is sent either way (the focal planes
+            # are fitted to the decoded disparity)
             choice = choose_default(lf, self.config.quality, self.present, views_hint=True)
             self.encoder, first = choice.encoder, choice.first
             self.prediction_db = choice.prediction_db
