@@ -140,7 +140,7 @@ def _splat_view(disp, cols, du, dv, dview, targets):  # pragma: no cover - compi
 
 
 @numba.njit(**_ROW)
-def _fill_holes(disp_row, dview_row):  # pragma: no cover - compiled
+def _fill_holes(disp_row, dview_row, mask):  # pragma: no cover - compiled
     """Fills the holes of one splatted view row in place: a hole run takes the disparity of
     its nearest splatted neighbour on the background side (the smaller disparity), so the
     background is extended, not the occluder; a row nothing landed on falls back to the
@@ -152,21 +152,32 @@ def _fill_holes(disp_row, dview_row):  # pragma: no cover - compiled
     at the default encode: MPSNR +0.07 (synthetic) … +0.34 dB (lytro_bikes) on all six
     scenes, toys_array's disocclusions included (+0.24 dB, MSSIM +0.016).
 
-    In place is exact: a run's neighbours are splatted pixels, never a run filled before
-    (a for loop with a run state, or a per-16-pixel minimum that skips whole blocks,
-    measured slower than this while loop). A row without a hole (most rows) returns after
-    one vectorised minimum.
+    In place is exact: a run's neighbours are splatted pixels, never a run filled before.
+    The holes are found through ``mask`` (zeroed scratch of one byte a pixel, padded to whole
+    uint64 words; set by a loop that vectorises) read as uint64 words, so the scan passes eight splatted pixels per
+    test: about 2.5 % of a view's pixels are holes, spread over most rows, and a test per
+    pixel took 0.45 ms a 375 x 540 view, this 0.2 ms (a per-16-pixel minimum of the floats,
+    tried before, was slower than the test per pixel).
     """
-    if np.min(dview_row) > _HOLE_TEST:
-        return
     w = disp_row.shape[0]
+    any_hole = np.uint8(0)
+    for x in range(w):
+        hole = np.uint8(dview_row[x] <= _HOLE_TEST)
+        mask[x] = hole
+        any_hole |= hole
+    if any_hole == 0:
+        return
+    words = mask.view(np.uint64)
     x = 0
     while x < w:
-        if dview_row[x] > _HOLE_TEST:
+        if (x & 7) == 0 and words[x >> 3] == 0:
+            x += 8
+            continue
+        if mask[x] == 0:
             x += 1
             continue
         start = x
-        while x < w and dview_row[x] <= _HOLE_TEST:
+        while x < w and mask[x] != 0:
             x += 1
         left, right = start - 1, x
         if left < 0 and right >= w:
@@ -311,6 +322,7 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, occlus
         dview = np.empty((h, w), np.float32)
         cols = np.arange(w).astype(np.float32)
         targets = np.empty(w, np.int32)
+        holes = np.zeros((w + 7) // 8 * 8, np.uint8)  # _fill_holes' mask, whole words
         idx = np.empty(w, np.int32)
         fxs = np.empty(w, np.int32)
         fys = np.empty(w, np.int32)
@@ -319,12 +331,12 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, occlus
         vals = np.empty(w * n_ch, np.int32)
         for k in range(task, n_views, chunks):
             _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, k // n_v, k % n_v, occlusion, gains,
-                       g_rows, g_row_w, g_cols, g_col_w, dview, cols, targets, idx, fxs, fys, gcols, vals, out)
+                       g_rows, g_row_w, g_cols, g_col_w, dview, cols, targets, holes, idx, fxs, fys, gcols, vals, out)
 
 
 @numba.njit(**_ROW)
 def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, occlusion, gains, g_rows, g_row_w,
-               g_cols, g_col_w, dview, cols, targets, idx, fxs, fys, gcols, vals, out):  # pragma: no cover
+               g_cols, g_col_w, dview, cols, targets, holes, idx, fxs, fys, gcols, vals, out):  # pragma: no cover
     """One view of :func:`warp_all_views`, in the caller's scratch buffers."""
     h, w = disp.shape
     has_gains = gains.shape[0] > 0
@@ -351,7 +363,7 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, occl
         if per_view:
             _row_taps(view_disp[u, v, y], cols, y, du, dv, h, idx, fxs, fys)
         elif splatted:
-            _fill_holes(disp[y], dview[y])  # the splat's scratch row, in place
+            _fill_holes(disp[y], dview[y], holes)  # the splat's scratch row, in place
             _row_taps(dview[y], cols, y, du, dv, h, idx, fxs, fys)
         else:
             _row_taps(disp[y], cols, y, du, dv, h, idx, fxs, fys)
@@ -391,9 +403,10 @@ def splat_all_views(disp, offsets, occlusion, out):  # pragma: no cover - compil
             continue
         cols = np.arange(w).astype(np.float32)
         targets = np.empty(w, np.int32)
+        holes = np.zeros((w + 7) // 8 * 8, np.uint8)
         _splat_view(disp, cols, du, dv, dview, targets)
         for y in range(h):
-            _fill_holes(disp[y], dview[y])
+            _fill_holes(disp[y], dview[y], holes)
 
 
 # RGB -> grey as OpenCV's 8-bit COLOR_RGB2GRAY computes it (BT.601 weights in 15-bit fixed

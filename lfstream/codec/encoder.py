@@ -159,6 +159,12 @@ class Encoder:
         return self._hints.last if self.depth_hint else None
 
     @property
+    def last_ring_luma(self) -> np.ndarray | None:
+        """The last frame's centre and outer-ring luma at the hint's resolution, as its sweep
+        read them (:attr:`lfstream.codec.hint.HintMap.ring_luma`), or ``None``."""
+        return self._hints.last_ring_luma if self.depth_hint else None
+
+    @property
     def residual_speed(self) -> int:
         """The residual layer's SVT-AV1 preset (:data:`RESIDUAL_SPEED`, :data:`VIEWS_SPEED`)."""
         return (VIEWS_SPEED if self.codes_views else RESIDUAL_SPEED)[self.preset]

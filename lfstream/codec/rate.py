@@ -125,7 +125,8 @@ class DefaultChoice:
         return bool(self.encoder.codes_views)
 
 
-def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, present: np.ndarray | None = None) -> float:
+def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, present: np.ndarray | None = None,
+                    ring_luma: np.ndarray | None = None) -> float:
     """How well the centre view and a hint predict the outer ring of views: the mean PSNR
     (dB) of the decoder's warp (:func:`lfstream.codec.warp.warp_views_at`) against those
     views, on luma block means at the hint's resolution (where sensor and coding noise are
@@ -138,6 +139,10 @@ def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, prese
         gains: ``(U, V, gh, gw, C)`` gain maps the stream sends (their channel mean is
             applied to the luma), or ``None``.
         present: ``(U, V)`` mask of the views that exist.
+        ring_luma: those block means of the centre and the ring views where the caller has
+            them (:attr:`lfstream.codec.hint.HintMap.ring_luma`: the encoder's sweep read
+            them, and reading the views again took about 2 ms of a 24 ms frame); ``None``:
+            computed here.
     """
     from lfstream.codec.hint import _grids, _ring_views
     from lfstream.codec.warp import warp_views_at
@@ -147,7 +152,11 @@ def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, prese
     ring = _ring_views(u, v, present)
     if not ring:
         return float("inf")
-    grids = _grids(lf, [(u // 2, v // 2), *ring], hint.scale)  # (1 + J, H // s, W // s) in [0, 1]
+    shape = (1 + len(ring), max(1, lf.shape[2] // hint.scale), max(1, lf.shape[3] // hint.scale))
+    if ring_luma is not None and ring_luma.shape == shape:
+        grids = ring_luma
+    else:
+        grids = _grids(lf, [(u // 2, v // 2), *ring], hint.scale)  # (1 + J, H // s, W // s) in [0, 1]
     disparity = hint.values()[: grids.shape[1], : grids.shape[2]] / np.float32(hint.scale)
     if gains is not None:
         gains = np.asarray(gains, np.float32).mean(axis=-1, keepdims=True)
@@ -198,7 +207,8 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
     if u * v == 1 or (present is not None and not np.all(present)) or cells < PREDICTION_CHECK_MIN_CELLS:
         # nothing to predict, views a sequence would not carry, or too few cells to tell
         return DefaultChoice(enc, first, None)
-    db = prediction_psnr(np.ascontiguousarray(to_uint8(np.asarray(frame))), enc.last_hint, enc.last_gains, present)
+    db = prediction_psnr(np.ascontiguousarray(to_uint8(np.asarray(frame))), enc.last_hint, enc.last_gains, present,
+                         enc.last_ring_luma)
     if db >= PREDICTION_FLOOR_DB:
         return DefaultChoice(enc, first, db)
     views = Encoder(quality=quality, depth_hint=views_hint, hint_options=opts, gain_grid=gain_grid, preset="balanced",

@@ -157,6 +157,20 @@ def test_the_default_is_the_fast_preset_byte_for_byte_where_the_warp_predicts():
     assert lfstream.encode(clip) == lfstream.encode(clip, preset="fast")
 
 
+@pytest.mark.parametrize("size", [(96, 128), (75, 101)])  # whole hint blocks, and a ragged edge
+def test_the_check_reads_the_sweeps_luma_not_the_views_again(size):
+    """The encoder keeps the centre and ring luma its sweep read (HintMap.ring_luma): the
+    check on it equals the check that reads the views itself (float rounding only)."""
+    from lfstream.codec.rate import choose_default, prediction_psnr
+
+    lf = synth_clip(1, 7, size, seed=5, noise=1.0, vignetting=0.2, motion=0, camera_pan=0).lf[0]
+    enc = choose_default(lf).encoder
+    assert enc.last_ring_luma is not None and enc.last_ring_luma.shape[0] == 9  # the centre and 8 ring views
+    kept = prediction_psnr(lf, enc.last_hint, enc.last_gains, ring_luma=enc.last_ring_luma)
+    read = prediction_psnr(lf, enc.last_hint, enc.last_gains)
+    assert kept == pytest.approx(read, abs=1e-4)
+
+
 def test_cli_encode_reports_the_defaults_check(unpredictable, tmp_path, capsys):
     src = tmp_path / "rig.npy"
     np.save(src, unpredictable)
