@@ -161,7 +161,8 @@ class Encoder:
     @property
     def last_ring_luma(self) -> np.ndarray | None:
         """The last frame's centre and outer-ring luma at the hint's resolution, as its sweep
-        read them (:attr:`lfstream.codec.hint.HintMap.ring_luma`), or ``None``."""
+        read them (:attr:`lfstream.codec.hint.HintMap.ring_luma`), where that frame's hint was
+        a key hint (a stream's first always is); else ``None``."""
         return self._hints.last_ring_luma if self.depth_hint else None
 
     @property

@@ -150,7 +150,7 @@ class HintMap:
             outer-ring views (:func:`_ring_views`) as means of ``scale x scale`` blocks: what
             the sweep read, kept for the encoder's check of its own prediction
             (:func:`lfstream.codec.rate.prediction_psnr`), which then reads no view again;
-            ``None`` where the map was not swept.
+            ``None`` unless asked for (``keep_ring_luma``) or where the map was not swept.
     """
 
     disparity: np.ndarray
@@ -404,7 +404,8 @@ def scene_range(disparity: np.ndarray, margin: float) -> tuple[float, float]:
 
 
 def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), present: np.ndarray | None = None,
-                      search: tuple[float, float] | None = None, axes: np.ndarray | None = None) -> HintMap:
+                      search: tuple[float, float] | None = None, axes: np.ndarray | None = None,
+                      keep_ring_luma: bool = False) -> HintMap:
     """The centre view's disparity at the hint's resolution.
 
     Args:
@@ -415,6 +416,8 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
             ``max_disparity``, else a coarse pass finds the scene's range.
         axes: the capture's view axes (a video's first frame); ``None``: detected
             (``options.geometry == "auto"``) or the convention.
+        keep_ring_luma: fill :attr:`HintMap.ring_luma` (0.2 ms a 7x7x375x540 frame; the
+            encoder asks on key hints, where a stream's first frame is checked).
 
     Shape:
         - lf: ``(U, V, H, W, C)``
@@ -435,11 +438,13 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     steps = np.asarray([(a - centre[0], b - centre[1]) for a, b in keys], np.float64)
     grids = _grids(frame, [centre, *keys], work)
     f = s // work
-    n_ring = 1 + len(_ring_views(u, v, present))  # sweep_views puts the ring first
-    # block means of block means are the map's block means (taken before the in-place
-    # high-pass; OpenCV's area resize: numpy's mean over a reshape took 4 ms, this 0.1)
-    ring_luma = np.stack([cv2.resize(g[: hs * f, : ws * f], (ws, hs), interpolation=cv2.INTER_AREA)
-                          for g in grids[:n_ring]]) if f > 1 else grids[:n_ring].copy()
+    ring_luma = None
+    if keep_ring_luma:
+        n_ring = 1 + len(_ring_views(u, v, present))  # sweep_views puts the ring first
+        # block means of block means are the map's block means (taken before the in-place
+        # high-pass; OpenCV's area resize: numpy's mean over a reshape took 4 ms, this 0.2)
+        ring_luma = np.stack([cv2.resize(g[: hs * f, : ws * f], (ws, hs), interpolation=cv2.INTER_AREA)
+                              for g in grids[:n_ring]]) if f > 1 else grids[:n_ring].copy()
     if axes is None:
         axes = identity
         if options.geometry == "auto":
@@ -597,7 +602,7 @@ class HintTracker:
         self._since_key = 0
         self._search: tuple[float, float] = (0.0, 0.0)  # the key hint's sweep range
         self._axes: np.ndarray | None = None  # the capture's view axes, from the first frame
-        self.last_ring_luma: np.ndarray | None = None  # the last frame's HintMap.ring_luma
+        self.last_ring_luma: np.ndarray | None = None  # the last frame's HintMap.ring_luma (key hints only)
 
     @property
     def last(self) -> QuantisedHint | None:
@@ -609,14 +614,14 @@ class HintTracker:
         opts = self.options
         prev = self._prev
         key = prev is None or self._since_key + 1 >= opts.key_interval or seq != self._prev_seq + 1
-        hm = estimate_hint_map(lf, opts, present, None if key else self._search, self._axes)
+        hm = estimate_hint_map(lf, opts, present, None if key else self._search, self._axes, keep_ring_luma=key)
         self._axes = hm.axes  # a rig's geometry does not change within a video
         if not key:
             lo, hi = self._search
             edge = 0.02 * (hi - lo)
             pressed = float(np.mean((hm.disparity <= lo + edge) | (hm.disparity >= hi - edge)))
             if pressed > 0.02 and opts.max_disparity is None:  # the scene's range changed: search again
-                hm, key = estimate_hint_map(lf, opts, present, axes=self._axes), True
+                hm, key = estimate_hint_map(lf, opts, present, axes=self._axes, keep_ring_luma=True), True
         payload = None
         if not key and prev.q.shape == hm.disparity.shape and prev.scale == hm.scale \
                 and prev.lo <= float(hm.disparity.min()) and float(hm.disparity.max()) <= prev.hi:
