@@ -24,7 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-deblock", action="store_true",
                    help="skip the post-filter of JPEG centre views (default: on; a residual layer then is not applied)")
     p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
-    p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1, help="frames per network batch")
+    p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1,
+                   help="frames per network batch (and per warp, on a CUDA device)")
     p.add_argument("--disparity-out", type=Path, help="folder for the centre-view disparity of each frame (PFM)")
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--json", action="store_true")

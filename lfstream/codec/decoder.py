@@ -70,7 +70,8 @@ class Decoder:
         hance: ``"auto"`` (JPEG-Hance where it helps: a JPEG centre view at quality <=
             HANCE_MAX_QUALITY[preset]),
             ``"on"`` or ``"off"``.
-        device: where the networks run (``"cpu"`` or ``"cuda"``).
+        device: where the networks run (``"cpu"`` or ``"cuda"``); on a CUDA device a batch's
+            frames are also warped there together (:attr:`warps_on_device`).
         preset: network preset whose shipped weights are used.
         deblock: the post-filter of JPEG centre views (:func:`lfstream.codec.jpeg.post_filter_jpeg`:
             strength from each JPEG's own quantisation table, the filter the encoder named
@@ -237,6 +238,46 @@ class Decoder:
         lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion, gains=gains, axes=axes)
         return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes, gains)
 
+    @property
+    def warps_on_device(self) -> bool:
+        """Whether a batch's frames are warped together as tensor operations on :attr:`device`
+        (:func:`lfstream.codec.warp_batched.warp_views_batched`: a CUDA device; the same bytes
+        as the CPU kernel without gains, within a level on a few samples with them) rather
+        than one by one in the fused CPU kernel."""
+        return self.device.startswith("cuda")
+
+    def _warp_on_device(self, packets: list[Packet], centres: np.ndarray, disparities: list[np.ndarray],
+                        axes: list[np.ndarray | None]) -> list[DecodedFrame] | None:
+        """:meth:`_warp` for a batch in one call on :attr:`device`; ``None`` (decided before
+        any gain map is read) where the batch does not share one warp: view axes that
+        differ, or a residual that replaces the views."""
+        if any(self._views_only(p) for p in packets):
+            return None
+        first = axes[0]
+        if any((a is None) != (first is None) or (a is not None and not np.array_equal(a, first)) for a in axes):
+            return None
+        import torch
+
+        from lfstream.codec.warp_batched import warp_views_batched
+
+        gains = [self._gains(p) for p in packets]
+        shapes = {g.shape for g in gains if g is not None}
+        if len(shapes) > 1:  # grids that differ: each frame with its own maps, on the CPU kernel
+            lfs = [warp_views(c, d, self.header.views, occlusion=self.occlusion, gains=g, axes=first)
+                   for c, d, g in zip(centres, disparities, gains)]
+        else:
+            dev = torch.device(self.device)
+            stacked = None
+            if shapes:  # frames without maps get ones: warped without gains, as the kernel does
+                shape = next(iter(shapes))
+                stacked = torch.from_numpy(np.stack([g if g is not None else np.ones(shape, np.float32)
+                                                     for g in gains])).to(dev)
+            lfs = list(warp_views_batched(torch.from_numpy(np.ascontiguousarray(centres)).to(dev),
+                                          torch.from_numpy(np.stack(disparities)).to(dev), self.header.views,
+                                          occlusion=self.occlusion, gains=stacked, axes=first).cpu().numpy())
+        return [DecodedFrame(p.seq, p.timestamp_us, lf, c, d, first, g)
+                for p, lf, c, d, g in zip(packets, lfs, centres, disparities, gains)]
+
     def decode_batch(self, packets: list[Packet], centres: np.ndarray | None = None) -> list[DecodedFrame]:
         """Decodes several packets; the networks run once over the batch. ``centres``: the
         output of :meth:`decode_centres` for these packets, when the caller already has it."""
@@ -255,8 +296,11 @@ class Decoder:
             hints.append(d)
             axes.append(a)
         if self._depth_net is None or all(self._views_only(p) for p in packets):
-            return [self._add_residual(p, self._warp(p, centre, hint if hint is not None else np.zeros((h, w), np.float32), a))
-                    for p, centre, hint, a in zip(packets, centres, hints, axes)]
+            disparities = [hint if hint is not None else np.zeros((h, w), np.float32) for hint in hints]
+            frames = self._warp_on_device(packets, centres, disparities, axes) if self.warps_on_device else None
+            if frames is None:
+                frames = [self._warp(p, centre, d, a) for p, centre, d, a in zip(packets, centres, disparities, axes)]
+            return [self._add_residual(p, frame) for p, frame in zip(packets, frames)]
         self.residual_skipped += sum(1 for p in packets if p.residual)
         from lfstream.models.depth_net import predict_view_disparities
 

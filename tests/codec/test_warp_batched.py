@@ -1,0 +1,124 @@
+"""The batched tensor warp (the decoder's warp for a GPU) against the fused CPU kernel it
+restates: the same bytes without gains, within a level on a few samples with them."""
+
+import io
+
+import numpy as np
+import pytest
+import torch
+
+import lfstream
+from lfstream.codec.decoder import Decoder, iter_decode
+from lfstream.codec.warp import view_disparities, warp_views, warp_views_per_view
+from lfstream.codec.warp_batched import warp_views_batched
+from lfstream.errors import LFShapeError, LFValueError
+from lfstream.synth import synth_clip
+
+
+def _scene(seed: int, size=(28, 36), views=5):
+    clip = synth_clip(1, views, size, seed=seed, layers=3, motion=0, camera_pan=0, disparity_range=(-1.6, 2.2))
+    return clip.lf[0, views // 2, views // 2], clip.disparity[0, views // 2, views // 2].astype(np.float32)
+
+
+def _batched(centres, disps, views, **kw):
+    return warp_views_batched(torch.from_numpy(np.stack(centres)), torch.from_numpy(np.stack(disps)), views,
+                              **kw).numpy()
+
+
+def _assert_within_a_level(got, ref, share=1e-3):
+    # the gain blend's float32 roundings may differ from the compiled kernel's (fused
+    # multiply-adds it chose): measured 20 samples in 3e7 of a 7x7x375x540 warp, by one level
+    diff = np.abs(got.astype(int) - ref.astype(int))
+    assert diff.max() <= 1
+    assert (diff > 0).mean() <= share
+
+
+@pytest.mark.parametrize("occlusion", [True, False])
+def test_same_bytes_as_the_kernel(occlusion):
+    centre, disp = _scene(5)
+    ref = warp_views(centre, disp, (5, 3), occlusion=occlusion)
+    assert (_batched([centre], [disp], (5, 3), occlusion=occlusion)[0] == ref).all()
+
+
+def test_view_axes_and_a_ragged_grid():
+    centre, disp = _scene(7, size=(25, 31))
+    axes = np.array([[0.9, 0.25], [-0.3, 1.1]], np.float32)
+    ref = warp_views(centre, disp, (3, 4), axes=axes)
+    assert (_batched([centre], [disp], (3, 4), axes=axes)[0] == ref).all()
+
+
+def test_gains_within_a_level(rng):
+    centre, disp = _scene(8)
+    for cg in (3, 1):
+        gains = rng.uniform(0.6, 1.5, (3, 3, 4, 5, cg)).astype(np.float32)
+        got = _batched([centre], [disp], (3, 3), gains=torch.from_numpy(gains[None]))[0]
+        _assert_within_a_level(got, warp_views(centre, disp, (3, 3), gains=gains))
+
+
+def test_frames_of_a_batch_are_warped_independently(rng):
+    """Two frames, one with gains and one with gains of 1 (warped without them, as the kernel
+    does), in passes of a few views: each equals its own warp."""
+    (c0, d0), (c1, d1) = _scene(2), _scene(3)
+    gains = np.ones((2, 5, 5, 3, 3, 3), np.float32)
+    gains[0] = rng.uniform(0.8, 1.2, (5, 5, 3, 3, 3))
+    got = _batched([c0, c1], [d0, d1], (5, 5), gains=torch.from_numpy(gains), chunk_pixels=3 * 28 * 36)
+    _assert_within_a_level(got[0], warp_views(c0, d0, (5, 5), gains=gains[0]))
+    assert (got[1] == warp_views(c1, d1, (5, 5))).all()
+
+
+def test_per_view_disparities_as_warp_views_per_view():
+    centre, disp = _scene(11)
+    maps = view_disparities(disp, (5, 5))
+    maps[1, 3] += 0.4  # a map that is not the splat of the centre's
+    ref = warp_views_per_view(centre, maps)
+    got = warp_views_batched(torch.from_numpy(centre[None]), torch.from_numpy(disp[None]), (5, 5),
+                             view_disparities=torch.from_numpy(maps[None])).numpy()[0]
+    assert (got == ref).all()
+
+
+def test_huge_disparities_clamp_to_the_border():
+    centre, _ = _scene(3, size=(16, 18), views=3)
+    for d in (1e6, -1e6, 3e38):
+        out = _batched([centre], [np.full(centre.shape[:2], d, np.float32)], (3, 3))[0]
+        assert (out == warp_views(centre, np.full(centre.shape[:2], d, np.float32), (3, 3))).all()
+        assert (out[1, 1] == centre).all()
+
+
+def test_bad_input_names_the_parameter():
+    centre, disp = _scene(4, size=(12, 14), views=3)
+    c, d = torch.from_numpy(centre[None]), torch.from_numpy(disp[None])
+    with pytest.raises(LFShapeError, match="centres"):
+        warp_views_batched(c.float(), d, (3, 3))
+    with pytest.raises(LFShapeError, match="disparities"):
+        warp_views_batched(c, d[:, :-1], (3, 3))
+    with pytest.raises(LFValueError, match="disparities"):
+        warp_views_batched(c, torch.full_like(d, float("nan")), (3, 3))
+    with pytest.raises(LFShapeError, match="gains"):
+        warp_views_batched(c, d, (3, 3), gains=torch.ones(1, 2, 3, 2, 2, 3))
+    with pytest.raises(LFValueError):
+        warp_views_batched(c, d, (0, 3))
+
+
+def test_the_decoder_warps_a_batch_on_the_device(monkeypatch):
+    """The decoder's batched path (a CUDA device's), run here on the CPU: every frame of a
+    vignetted clip within a level of the kernel's decode, gains and all."""
+    clip = synth_clip(3, 5, (40, 52), seed=9, noise=1.0, vignetting=0.3)
+    data = lfstream.encode(clip.lf)
+    ref = list(iter_decode(io.BytesIO(data), batch=3))
+    assert all(fr.gains is not None for fr in ref)
+    monkeypatch.setattr(Decoder, "warps_on_device", property(lambda self: True))
+    got = list(iter_decode(io.BytesIO(data), batch=3))
+    assert [fr.seq for fr in got] == [fr.seq for fr in ref]
+    for a, b in zip(got, ref):
+        _assert_within_a_level(a.lf, b.lf)
+        assert (a.disparity == b.disparity).all() and (a.gains == b.gains).all()
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_cuda_agrees_with_the_cpu(rng):
+    centre, disp = _scene(6)
+    gains = torch.from_numpy(rng.uniform(0.8, 1.2, (1, 5, 5, 3, 3, 3)).astype(np.float32))
+    cpu = warp_views_batched(torch.from_numpy(centre[None]), torch.from_numpy(disp[None]), (5, 5), gains=gains)
+    gpu = warp_views_batched(torch.from_numpy(centre[None]).cuda(), torch.from_numpy(disp[None]).cuda(), (5, 5),
+                             gains=gains.cuda())
+    _assert_within_a_level(gpu.cpu().numpy(), cpu.numpy())
