@@ -9,9 +9,10 @@ view (nearest pixel, the larger disparity wins), holes given their nearest splat
 neighbour on the background side (the smaller disparity; a row nothing landed on keeps the
 centre map), bilinear sampling in 1/1024-pixel fixed point with the border replicated, the
 per-view gain maps bilinearly up-sampled (OpenCV's INTER_LINEAR taps) and multiplied in.
-Integer steps are exact; where the kernel's compiler may fuse a multiply and an add into one
-rounding (the splat and tap positions, the gain blend), the float results can differ in the
-last bit, which moves a sample by one level in a few samples per million (the tests bound it).
+Integer steps are exact; the splat and tap positions round once, as the kernel's fused
+multiply-adds do, so without gains the bytes are the kernel's. In the gain blend not every
+choice of the kernel's compiler is reproduced: about one sample in 10^6 moves by a level
+(the tests bound it).
 """
 
 from __future__ import annotations
