@@ -105,11 +105,12 @@ def load_from_args(args: argparse.Namespace):
     return load_lf(args.input, read_options(args))
 
 
-def coding_layers(depth_hint: bool, residual: int | None, residual_mode: str | None) -> str:
+def coding_layers(depth_hint: bool, residual: int | None, residual_mode: str | None,
+                  hint_scale: int | None = None) -> str:
     """The layers of a stream beside its centre view, as the text outputs print them:
-    `` + hint + residual q40 (views)``."""
-    return (" + hint" if depth_hint else "") + (f" + residual q{residual} ({residual_mode})" if residual is not None
-                                                else "")
+    `` + hint 1/8 + residual q40 (views)`` (the hint's resolution where it is known)."""
+    hint = (" + hint" + (f" 1/{hint_scale}" if hint_scale else "")) if depth_hint else ""
+    return hint + (f" + residual q{residual} ({residual_mode})" if residual is not None else "")
 
 
 def _json_default(o: object):

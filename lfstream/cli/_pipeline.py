@@ -122,7 +122,7 @@ def _text(summary: dict, out: Path | None) -> str:
     c = summary.get("coding")
     if c:
         lines.append(f"  coding: {c['preset']} q{c['quality']}"
-                     + coding_layers(c["depth_hint"], c["residual"], c["residual_mode"])
+                     + coding_layers(c["depth_hint"], c["residual"], c["residual_mode"], c.get("hint_scale"))
                      + (f"; the prediction checked at {c['prediction_db']:.1f} dB" if c.get("prediction_db") is not None
                         else ""))
     if summary.get("refocus"):

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from lfstream.cli._common import add_read_options, emit, float_in, int_in, load_from_args
 from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS
+from lfstream.codec.hint import HintOptions
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.residual import RESIDUAL_MODES
 
@@ -60,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
     quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
     residual, residual_mode = args.residual, args.residual_mode
     prediction_db = None  # the default's check of its own prediction (rate.choose_default)
+    hint_scale = HintOptions().hint_scale  # the hint's resolution divisor (the default may double it)
     if args.bpp is not None and (residual is not None or residual_mode != "prediction"):
         raise LFValueError("--residual: rate control (--bpp) chooses the residual layer itself; give one or the other")
     if residual_mode != "prediction" and residual is None:
@@ -72,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
         rate = choose_configuration(frames, args.bpp, fps, loaded.present, preset=args.preset)
         quality, depth_hint, preset, residual = rate.quality, rate.depth_hint, rate.preset, rate.residual
         residual_mode = rate.residual_mode
+        hint_scale = rate.header.meta.get("hint", {}).get("hint_scale", hint_scale)
         stats = write_stream_file(args.output, rate.header, rate.packets)
         stats.encode_s = time.perf_counter() - t0  # the search included
     elif uses_default_choice(args.preset, depth_hint, residual, residual_mode):
@@ -86,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
                             present=loaded.present, first=choice.first)
         stats.encode_s += first_s  # frame 0's fast encode and the check
         prediction_db = choice.prediction_db
+        hint_scale = enc.hint_options.hint_scale
     else:
         stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]),
                             Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
@@ -94,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     result = dataclasses.asdict(stats)
     result.update({"output": str(args.output), "bpp": bpp(stats.bytes, frames.shape),
                    "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": quality, "depth_hint": depth_hint,
+                   "hint_scale": hint_scale if depth_hint else None,
                    "preset": preset, "residual": residual, "residual_mode": residual_mode if residual is not None else None,
                    "residual_bpp": bpp(stats.residual_bytes, frames.shape)})
     if prediction_db is not None:
@@ -101,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     if rate is not None:
         result["rate_control"] = {"target_bpp": args.bpp, "candidates": list(rate.candidates)}
     emit(args, result, lambda r: f"{r['frames']} frame(s) -> {args.output}: {r['bytes']} bytes, {r['bpp']:.5f} bpp"
-         + (f" (hint {r['hint_bpp']:.5f} bpp)" if depth_hint else "") + f", {preset} q{quality}"
+         + (f" (hint 1/{hint_scale} {r['hint_bpp']:.5f} bpp)" if depth_hint else "") + f", {preset} q{quality}"
          + (f", residual q{residual} {residual_mode} ({r['residual_bpp']:.5f} bpp)" if residual is not None else "")
          + f", encoded in {r['encode_s']:.3f} s")
     return 0

@@ -59,6 +59,7 @@ def describe_stream(path: Path, frames: int) -> dict:
     residual = header.meta.get("residual") if header.has_residual else None
     return {"version": header.version, "centre_codec": CODEC_NAMES[header.codec],
             "preset": header.meta.get("preset", "fast"), "quality": header.quality, "depth_hint": header.has_hint,
+            "hint_scale": header.meta.get("hint", {}).get("hint_scale") if header.has_hint else None,
             "residual": None if residual is None else residual.get("quality"),
             "residual_mode": None if residual is None else residual.get("mode", "prediction"),
             "file_bytes": size, "bpp": 8.0 * size / max(frames * u * v * h * w, 1)}
@@ -82,7 +83,7 @@ def _text(info: dict) -> str:
         lines.append(f"  disparity ground truth, {lo:.3f} .. {hi:.3f} px/view")
     s = info.get("stream")
     if s:
-        layers = coding_layers(s["depth_hint"], s["residual"], s["residual_mode"])
+        layers = coding_layers(s["depth_hint"], s["residual"], s["residual_mode"], s.get("hint_scale"))
         lines.append(f"  stream  .lfs version {s['version']}, {s['preset']} ({s['centre_codec']} centre) q{s['quality']}"
                      f"{layers}; {s['file_bytes']} bytes, {s['bpp']:.5f} bpp")
     return "\n".join(lines)

@@ -41,7 +41,7 @@ guided by the decoded centre view (edges of the depth follow edges of the pictur
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -151,6 +151,10 @@ class HintMap:
             the sweep read, kept for the encoder's check of its own prediction
             (:func:`lfstream.codec.rate.prediction_psnr`), which then reads no view again;
             ``None`` unless asked for (``keep_ring_luma``) or where the map was not swept.
+        coarse: ``(H // 2s, W // 2s)`` float32, the same sweep's map at twice the scale
+            ``s``: exactly what a sweep with ``hint_scale = 2s`` sends (the encoder's
+            default may choose it, :func:`lfstream.codec.rate.choose_default`); ``None``
+            unless asked for (``keep_coarse``).
     """
 
     disparity: np.ndarray
@@ -159,6 +163,7 @@ class HintMap:
     axes: np.ndarray = field(default_factory=lambda: np.eye(2, dtype=np.float32))
     reach: float = 1.0
     ring_luma: np.ndarray | None = None
+    coarse: np.ndarray | None = None
 
 
 def is_standard(axes: np.ndarray | None) -> bool:
@@ -405,7 +410,7 @@ def scene_range(disparity: np.ndarray, margin: float) -> tuple[float, float]:
 
 def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), present: np.ndarray | None = None,
                       search: tuple[float, float] | None = None, axes: np.ndarray | None = None,
-                      keep_ring_luma: bool = False) -> HintMap:
+                      keep_ring_luma: bool = False, keep_coarse: bool = False) -> HintMap:
     """The centre view's disparity at the hint's resolution.
 
     Args:
@@ -418,6 +423,8 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
             (``options.geometry == "auto"``) or the convention.
         keep_ring_luma: fill :attr:`HintMap.ring_luma` (0.2 ms a 7x7x375x540 frame; the
             encoder asks on key hints, where a stream's first frame is checked).
+        keep_coarse: fill :attr:`HintMap.coarse` (block means of the same working map and
+            the same median: well under a millisecond).
 
     Shape:
         - lf: ``(U, V, H, W, C)``
@@ -471,12 +478,25 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     lo, hi = search
     if not hi > lo:
         lo, hi = lo - 0.5, hi + 0.5
-    disp = _sweep(_high_pass(grids), offsets, lo, hi, work, options)
-    if f > 1:  # the sent grid: block means of the working-resolution map
-        disp = cv2.resize(disp[: hs * f, : ws * f], (ws, hs), interpolation=cv2.INTER_AREA)
-    if options.median > 1 and min(disp.shape) >= options.median:
-        disp = cv2.medianBlur(np.ascontiguousarray(disp, np.float32), options.median)
-    return HintMap(disp, s, (float(lo), float(hi)), axes, float(np.abs(grid_offsets).max()) or 1.0, ring_luma)
+    work_map = _sweep(_high_pass(grids), offsets, lo, hi, work, options)
+    disp = _sent_grid(work_map, (h, w), s, work, options.median)
+    coarse = _sent_grid(work_map, (h, w), 2 * s, work, options.median) if keep_coarse else None
+    return HintMap(disp, s, (float(lo), float(hi)), axes, float(np.abs(grid_offsets).max()) or 1.0, ring_luma,
+                   coarse)
+
+
+def _sent_grid(work_map: np.ndarray, size: tuple[int, int], scale: int, work: int, median: int) -> np.ndarray:
+    """The map sent at ``scale``: block means of the working-resolution map (``work`` px
+    a cell), median-filtered where it is large enough."""
+    h, w = size
+    hs, ws = max(1, h // scale), max(1, w // scale)
+    f = scale // work
+    disp = work_map
+    if f > 1:
+        disp = cv2.resize(work_map[: hs * f, : ws * f], (ws, hs), interpolation=cv2.INTER_AREA)
+    if median > 1 and min(disp.shape) >= median:
+        disp = cv2.medianBlur(np.ascontiguousarray(disp, np.float32), median)
+    return disp
 
 
 def estimate_disparity(lf: np.ndarray, options: HintOptions = HintOptions(),
@@ -603,6 +623,7 @@ class HintTracker:
         self._search: tuple[float, float] = (0.0, 0.0)  # the key hint's sweep range
         self._axes: np.ndarray | None = None  # the capture's view axes, from the first frame
         self.last_ring_luma: np.ndarray | None = None  # the last frame's HintMap.ring_luma (key hints only)
+        self._key_map: HintMap | None = None  # the last key hint's map (with its coarser twin)
 
     @property
     def last(self) -> QuantisedHint | None:
@@ -614,7 +635,8 @@ class HintTracker:
         opts = self.options
         prev = self._prev
         key = prev is None or self._since_key + 1 >= opts.key_interval or seq != self._prev_seq + 1
-        hm = estimate_hint_map(lf, opts, present, None if key else self._search, self._axes, keep_ring_luma=key)
+        hm = estimate_hint_map(lf, opts, present, None if key else self._search, self._axes, keep_ring_luma=key,
+                               keep_coarse=key)
         self._axes = hm.axes  # a rig's geometry does not change within a video
         if not key:
             lo, hi = self._search
@@ -637,19 +659,44 @@ class HintTracker:
                 if len(whole) < len(payload):  # a moving scene: the map itself is smaller
                     payload = whole
         if payload is None:
-            # a key hint: its 8-bit grid has headroom, so the next frames' deltas fit it
-            d = hm.disparity
-            lo, hi = float(d.min()), float(d.max())
-            pad = 0.1 * (hi - lo) + 0.05
-            qh = quantise(hm, (max(lo - pad, hm.search[0]), min(hi + pad, hm.search[1])), opts.precision)
+            qh = self._key_hint(hm)
             payload = _full_payload(qh)
             self._since_key = 0
             self._search = hm.search
+            self._key_map = hm
         else:
             self._since_key += 1
         self._prev, self._prev_seq = qh, seq
         self.last_ring_luma = hm.ring_luma
         return payload
+
+    def _key_hint(self, hm: HintMap) -> QuantisedHint:
+        """A key hint's 8-bit grid, with headroom so that the next frames' deltas fit it."""
+        d = hm.disparity
+        lo, hi = float(d.min()), float(d.max())
+        pad = 0.1 * (hi - lo) + 0.05
+        return quantise(hm, (max(lo - pad, hm.search[0]), min(hi + pad, hm.search[1])), self.options.precision)
+
+    def coarser_key_hint(self) -> QuantisedHint | None:
+        """The last frame's key hint as it would be sent at twice the scale, from the same
+        sweep (:attr:`HintMap.coarse`): exactly the hint a tracker with that ``hint_scale``
+        sends for the frame. ``None`` where the last frame was not a key hint."""
+        hm = self._key_map
+        if self._prev is None or self._since_key != 0 or hm is None or hm.coarse is None:
+            return None
+        return self._key_hint(HintMap(hm.coarse, 2 * hm.scale, hm.search, hm.axes, hm.reach))
+
+    def coarsen(self) -> bytes:
+        """Sends the last frame's key hint at twice the scale (:meth:`coarser_key_hint`)
+        instead, and the frames after it at that scale: the payload that replaces the
+        frame's."""
+        qh = self.coarser_key_hint()
+        if qh is None:
+            raise LFValueError("coarsen: the last frame's hint is not a key hint")
+        self.options = replace(self.options, hint_scale=qh.scale)
+        self._prev = qh
+        self._key_map = None
+        return _full_payload(qh)
 
 
 class HintDecoder:

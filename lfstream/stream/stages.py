@@ -239,10 +239,12 @@ class EncoderStage(ConsumerStage):
         return packet
 
     def coding(self) -> dict:
-        """What the stream's encoder codes (the summary's ``coding``): preset, quality, hint,
-        residual layer, and the default's check of its prediction (``prediction_db``)."""
+        """What the stream's encoder codes (the summary's ``coding``): preset, quality, hint
+        (and its resolution divisor, ``hint_scale``), residual layer, and the default's check
+        of its prediction (``prediction_db``)."""
         enc = self.encoder
         return {"preset": enc.preset, "quality": int(enc.quality), "depth_hint": bool(enc.depth_hint),
+                "hint_scale": int(enc.hint_options.hint_scale) if enc.depth_hint else None,
                 "residual": enc.residual, "residual_mode": enc.residual_mode if enc.residual is not None else None,
                 "prediction_db": None if self.prediction_db is None else round(float(self.prediction_db), 3)}
 

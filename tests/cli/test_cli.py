@@ -336,11 +336,11 @@ def test_info_on_a_stream_says_what_it_carries(capsys, tmp_path):
     assert main(["info", str(tmp_path / "a.lfs"), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)["stream"]
     assert s == {"version": 1, "centre_codec": "jpeg", "preset": "fast", "quality": 40, "depth_hint": True,
-                 "residual": None, "residual_mode": None, "file_bytes": len(data),
+                 "hint_scale": 4, "residual": None, "residual_mode": None, "file_bytes": len(data),
                  "bpp": pytest.approx(8 * len(data) / (2 * 7 * 7 * 64 * 96))}
     (tmp_path / "b.lfs").write_bytes(lfstream.encode(lf, quality=40, preset="best", residual=30))
     assert main(["info", str(tmp_path / "b.lfs")]) == 0
-    assert "version 3, best (av1 centre) q40 + hint + residual q30 (prediction)" in capsys.readouterr().out
+    assert "version 3, best (av1 centre) q40 + hint 1/4 + residual q30 (prediction)" in capsys.readouterr().out
 
 
 def test_the_stream_summary_text_says_what_was_coded():
@@ -354,3 +354,5 @@ def test_the_stream_summary_text_says_what_was_coded():
     summary["coding"] = {"preset": "fast", "quality": 50, "depth_hint": True, "residual": None, "residual_mode": None,
                          "prediction_db": None}
     assert "coding: fast q50 + hint\n" in _text(summary, None) + "\n"
+    summary["coding"]["hint_scale"] = 8  # the hint's resolution, where the summary has it
+    assert "coding: fast q50 + hint 1/8\n" in _text(summary, None) + "\n"

@@ -350,3 +350,23 @@ def test_a_payload_declaring_a_huge_size_is_refused_before_allocating():
     body = zstandard.ZstdCompressor(level=9).compress(bytes(1 << 20))
     with pytest.raises(BitstreamError, match="declares 1048576 bytes"):
         H.decode_hint(head + body, (32, 32), frame=2)
+
+
+def test_the_coarse_map_is_the_sweep_at_twice_the_scale():
+    """HintMap.coarse, and the tracker's coarser key hint, are exactly what a sweep and a
+    tracker with twice the hint scale give for the frame; the frames after it then follow at
+    that scale, byte for byte with that tracker."""
+    clip = synth_clip(2, 5, (136, 200), seed=12, noise=1.0, motion=0.5, camera_pan=0).lf
+    fine = H.estimate_hint_map(clip[0], H.HintOptions(), keep_coarse=True)
+    native = H.estimate_hint_map(clip[0], H.HintOptions(hint_scale=8))
+    assert fine.scale == 4 and native.scale == 8 and fine.coarse.shape == (17, 25)
+    assert np.array_equal(fine.coarse, native.disparity)
+    tracker, reference = H.HintTracker(), H.HintTracker(H.HintOptions(hint_scale=8))
+    tracker.encode(clip[0], 0)
+    assert tracker.coarser_key_hint().scale == 8
+    assert tracker.coarsen() == reference.encode(clip[0], 0)
+    assert tracker.options.hint_scale == 8 and tracker.last.scale == 8
+    assert tracker.encode(clip[1], 1) == reference.encode(clip[1], 1)
+    assert tracker.coarser_key_hint() is None  # frame 1 is a delta, not a key hint
+    with pytest.raises(LFValueError):
+        tracker.coarsen()

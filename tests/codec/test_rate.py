@@ -9,6 +9,7 @@ import pytest
 import lfstream
 from lfstream.cli import main
 from lfstream.codec.rate import RATE_TOLERANCE, choose_configuration
+from lfstream.errors import LFValueError
 from lfstream.metrics import bpp, mpsnr
 from lfstream.synth import synth_clip
 
@@ -210,3 +211,55 @@ def test_the_default_keeps_the_prediction_where_views_are_missing():
     data = lfstream.encode(lf, present=present)
     assert data == lfstream.encode(lf, present=present, preset="fast")
     assert lfstream.decode(data)[0].shape == lf.shape
+
+
+def test_the_check_compares_hints_of_two_resolutions_on_the_same_luma():
+    """grid_scale: the hint's own scale changes nothing; a coarser hint is judged on the
+    finer luma (up-sampled), a scale that does not divide the hint's is refused."""
+    from lfstream.codec.encoder import Encoder
+    from lfstream.codec.rate import prediction_psnr
+
+    lf = synth_clip(1, 7, (144, 176), seed=5, noise=1.0, vignetting=0.2, motion=0, camera_pan=0).lf[0]
+    enc = Encoder(depth_hint=True)
+    enc.encode_frame(lf, 0, 0)
+    fine = prediction_psnr(lf, enc.last_hint, enc.last_gains, ring_luma=enc.last_ring_luma)
+    assert prediction_psnr(lf, enc.last_hint, enc.last_gains, ring_luma=enc.last_ring_luma, grid_scale=4) == fine
+    coarse = enc.coarser_first_hint()
+    same_grid = prediction_psnr(lf, coarse, enc.last_gains, ring_luma=enc.last_ring_luma, grid_scale=4)
+    assert same_grid == pytest.approx(prediction_psnr(lf, coarse, enc.last_gains, grid_scale=4), abs=1e-4)
+    assert abs(same_grid - fine) < 1.0  # a smooth scene: the coarser hint predicts about as well
+    with pytest.raises(LFValueError, match="grid_scale"):
+        prediction_psnr(lf, enc.last_hint, grid_scale=3)
+
+
+def test_the_default_sends_the_coarser_hint_where_it_predicts_as_well():
+    """Where the hint at 1/8 predicts the ring within HINT_COARSEN_MAX_LOSS_DB of the 1/4
+    one, the default sends it (the stream is the fast preset's with hint_scale 8, byte for
+    byte: the same sweep, frame 0 not coded twice), fewer bytes for about the same picture;
+    a threshold no hint can meet keeps 1/4."""
+    from lfstream.codec import rate
+    from lfstream.codec.bitstream import split_stream
+    from lfstream.codec.hint import HintOptions
+
+    clip = synth_clip(2, 7, (144, 176), seed=5, noise=1.0, vignetting=0.2, motion=0.5, camera_pan=0).lf
+    data = lfstream.encode(clip)
+    assert split_stream(data)[0].meta["hint"]["hint_scale"] == 8
+    assert data == lfstream.encode(clip, preset="fast", hint_options=HintOptions(hint_scale=8))
+    fine = lfstream.encode(clip, preset="fast")
+    assert len(data) < len(fine)  # the hint is a small share of this small scene: 2 % fewer bytes
+    assert mpsnr(lfstream.decode(data)[0], clip[0]) > mpsnr(lfstream.decode(fine)[0], clip[0]) - 0.3
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(rate, "HINT_COARSEN_MAX_LOSS_DB", -100.0)
+        assert lfstream.encode(clip) == fine
+    # a named hint is used as it is
+    assert split_stream(lfstream.encode(clip, hint_options=HintOptions()))[0].meta["hint"]["hint_scale"] == 4
+
+
+def test_the_default_keeps_the_finer_hint_for_thin_structures():
+    """lytro_bikes (spokes, railings): the 1/8 hint's check loses ~0.4 dB, the stream keeps 1/4."""
+    from lfstream.codec.rate import choose_default
+    from tests.conftest import shared
+
+    lf = np.asarray(lfstream.read_lf(shared("lytro_bikes")))
+    choice = choose_default(lf)
+    assert choice.encoder.hint_options.hint_scale == 4 and choice.encoder.last_hint.scale == 4

@@ -44,8 +44,8 @@ def test_transports_agree_and_outputs_are_valid(tmp_path, transport):
     assert summary["mpsnr"] > 20 and 0 < summary["bpp"] < 1
     # what the default chose for a 5x5 grid of 48x64 views: an AV1 centre; too few hint
     # cells for the check of its prediction (lfstream.codec.rate.choose_default)
-    assert summary["coding"] == {"preset": "balanced", "quality": 50, "depth_hint": True, "residual": None,
-                                 "residual_mode": None, "prediction_db": None}
+    assert summary["coding"] == {"preset": "balanced", "quality": 50, "depth_hint": True, "hint_scale": 4,
+                                 "residual": None, "residual_mode": None, "prediction_db": None}
     # the summary's figures are consistent with what was streamed, not merely present
     assert summary["fps"] == pytest.approx(summary["frames"] / summary["wall_s"], rel=0.01)
     assert summary["mssim_frames"] == [0, 1, 2, 3] and 0.5 < summary["mssim"] <= 1
