@@ -127,7 +127,8 @@ def hance_lf_rows(device: str, quick: bool) -> list[dict]:
 
 def bench_depth(device: str, runs: int, quick: bool) -> list[dict]:
     """Depth-Net fast (the hint refiner) through the decoder: each real scene's default encode,
-    with the hint at 1/4 (the default) and at 1/8 resolution (about a third of the hint bytes),
+    with the hint at 1/4 and at 1/8 resolution (about a third of the hint bytes; the default
+    encode chooses between the two per stream, lfstream.codec.rate.HINT_COARSEN_MAX_LOSS_DB),
     decoded with ``depth="hint"`` and ``depth="net"`` (JPEG-Hance off in both); scenes it was
     trained on are marked. The issue's two ways to win: net over hint at the same bits, or
     net on the 1/8 hint at the quality of the 1/4 hint."""
