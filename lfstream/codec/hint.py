@@ -152,9 +152,10 @@ class HintMap:
             (:func:`lfstream.codec.rate.prediction_psnr`), which then reads no view again;
             ``None`` unless asked for (``keep_ring_luma``) or where the map was not swept.
         coarse: ``(H // 2s, W // 2s)`` float32, the same sweep's map at twice the scale
-            ``s``: exactly what a sweep with ``hint_scale = 2s`` sends (the encoder's
-            default may choose it, :func:`lfstream.codec.rate.choose_default`); ``None``
-            unless asked for (``keep_coarse``).
+            ``s``: exactly what a sweep with ``hint_scale = 2s`` sends where the view has
+            ``2s`` pixels a side (the encoder's default may choose it,
+            :func:`lfstream.codec.rate.choose_default`); ``None`` unless asked for
+            (``keep_coarse``).
     """
 
     disparity: np.ndarray
