@@ -38,8 +38,7 @@ DEFAULT_CHUNK_PIXELS = 1 << 25
 def _floor_int(t: torch.Tensor, offset: float) -> torch.Tensor:
     """floor(t) as the kernel computes it (:func:`lfstream.codec._kernels._floor_int`): the
     truncation of ``t + offset`` in float32, clamped the same way."""
-    off = torch.tensor(offset, dtype=torch.float32, device=t.device)
-    return (t.clamp(1.0 - offset, 1.0e9) + off).to(torch.int32) - int(offset)
+    return (t.clamp(1.0 - offset, 1.0e9) + offset).to(torch.int32) - int(offset)  # a float32 sum
 
 
 def _fma(a: torch.Tensor, b: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
@@ -163,20 +162,25 @@ def warp_views_batched(
     d = disparities.to(dev, torch.float32).reshape(b, 1, h, w)
     if not torch.isfinite(d).all():
         raise LFValueError("disparities: NaN or Inf")
-    if view_disparities is not None and tuple(view_disparities.shape) != (b, u, v, h, w):
-        raise LFShapeError(f"view_disparities: expected {(b, u, v, h, w)}, got {tuple(view_disparities.shape)}")
+    if view_disparities is not None:
+        if tuple(view_disparities.shape) != (b, u, v, h, w):
+            raise LFShapeError(f"view_disparities: expected {(b, u, v, h, w)}, got {tuple(view_disparities.shape)}")
+        view_disparities = view_disparities.to(dev, torch.float32).reshape(b, u * v, h, w)
     offsets = torch.from_numpy(view_offsets((u, v), axes).reshape(-1, 2)).to(dev)
     # the padded centre views, one int32 plane per channel, flat: a tap is one index
     padded = torch.nn.functional.pad(centres.permute(0, 3, 1, 2).float(), (1, 1, 1, 1), mode="replicate")
     src = padded.to(torch.int32).reshape(b, c, (h + 2) * (w + 2))
-    has_gains = None
+    has_gains = None  # (B,) bool: the frames warped with their gains
     if gains is not None:
         gains = gains.to(dev, torch.float32)
         if gains.ndim != 6 or tuple(gains.shape[:3]) != (b, u, v) or gains.shape[5] not in (1, c):
             raise LFShapeError(f"gains: expected ({b}, {u}, {v}, gh, gw, 1 or {c}), got {tuple(gains.shape)}")
-        has_gains = ((gains - 1.0).abs() >= 1e-6).flatten(1).any(dim=1)  # per frame
+        has_gains = ((gains - 1.0).abs() >= 1e-6).flatten(1).any(dim=1)
+        if not bool(has_gains.any()):  # one test here, not one (a device sync) per pass
+            has_gains = None
         rows, row_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(h, gains.shape[3]))
         cols, col_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(w, gains.shape[4]))
+        gains = gains.reshape(b, u * v, *gains.shape[3:])
     out = torch.empty((b, u * v, h, w, c), dtype=torch.uint8, device=dev)
     step = max(1, chunk_pixels // max(1, b * h * w))
     ys = torch.arange(h, device=dev, dtype=torch.float32).view(1, 1, h, 1)
@@ -187,7 +191,7 @@ def warp_views_batched(
         du = offsets[k0:k1, 0].view(1, n, 1, 1)
         dv = offsets[k0:k1, 1].view(1, n, 1, 1)
         if view_disparities is not None:
-            maps = view_disparities.to(dev, torch.float32).reshape(b, u * v, h, w)[:, k0:k1]
+            maps = view_disparities[:, k0:k1]
         elif occlusion:
             still = ((du == 0) & (dv == 0)).expand(b, n, h, w)  # the centre view is not splatted
             maps = torch.where(still, d, _fill_holes(_splat(d, du, dv), d))
@@ -202,8 +206,8 @@ def warp_views_batched(
         idx = (y0.to(torch.int64) * (w + 2) + x0).reshape(b, 1, -1)  # the top-left tap in the padded view
         val = _bilinear(src, idx, fx, fy, w + 2).view(b, c, n, h, w)  # 2^13 x the sample
         res = (val + (1 << (_SCALE_BITS - 1))) >> _SCALE_BITS
-        if has_gains is not None and bool(has_gains.any()):
-            gc = _gain_columns(gains.reshape(b, u * v, *gains.shape[3:])[:, k0:k1], cols, col_w)
+        if has_gains is not None:
+            gc = _gain_columns(gains[:, k0:k1], cols, col_w)
             wa = row_w.view(1, 1, h, 1, 1)
             wb = 1.0 - wa
             g = _fma(gc[:, :, rows[:, 0]], wa, gc[:, :, rows[:, 1]] * wb)  # (B, n, H, W, Cg)
