@@ -6,7 +6,8 @@ HCI "star" scenes as their centre 3x3, the only complete square of views they ha
 - lfstream's presets (fast = JPEG, balanced / best = AV1 centre view; all with the depth
   hint) and its default (no preset named: the encoder's choice per scene) over a sweep of
   qualities, and lfstream's rate control (``encode(lf, bpp=T)``, every
-  preset and hint precision considered) at targets T from 0.005 to 0.1 bpp;
+  preset and hint precision considered; and ``encode(lf, bpp=T, preset="fast")``, the
+  fast preset's quick search) at targets T from 0.005 to 0.1 bpp;
 - x265 preset medium and preset ultrafast, and SVT-AV1 (presets 8 and 4), each coding the views as
   one pseudo-sequence (raster order, one key frame) over a sweep of constant QP / CRF.
 
@@ -86,12 +87,14 @@ def lfstream_curve(lf: np.ndarray, preset: str | None, quick: bool) -> list[dict
     return pts
 
 
-def rate_control_curve(lf: np.ndarray, quick: bool) -> list[dict]:
+def rate_control_curve(lf: np.ndarray, quick: bool, preset: str | None = None) -> list[dict]:
+    """Rate control at every target; ``preset`` named: only that preset (``fast``: the quick
+    search, lfstream.codec.rate.SEARCHES)."""
     from lfstream.codec.bitstream import split_stream
 
     pts = []
     for target in TARGETS[1:5] if quick else TARGETS:
-        data, t_enc = _timed(lambda: lfstream.encode(lf, bpp=target))
+        data, t_enc = _timed(lambda: lfstream.encode(lf, bpp=target, preset=preset))
         rec, t_dec = _timed(lambda: lfstream.decode(data)[0])
         header = split_stream(data)[0]
         p = _point(lf, data, rec, target, t_enc, t_dec)
@@ -184,6 +187,7 @@ def main(argv=None) -> dict:
         curves = {} if args.skip_presets else {f"lfstream {preset or 'default'}": lfstream_curve(lf, preset, args.quick)
                                                for preset in PRESETS}
         curves["lfstream --bpp (rate control)"] = rate_control_curve(lf, args.quick)
+        curves["lfstream --bpp --preset fast"] = rate_control_curve(lf, args.quick, preset="fast")
         for method, (codec, preset, params) in BASELINES.items():
             curves[method] = baseline_curve(lf, codec, preset, params)
         bd = bjontegaard(curves)

@@ -26,7 +26,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG), balanced "
                    "(AV1, SVT preset 12), best (AV1, SVT preset 8). Default: fast from 7x7 views up, balanced "
                    "below, best up to 3x3, and the views as one AV1 sequence where the first frame shows that "
-                   "warping cannot predict them; with --bpp, the default is to try all three")
+                   "warping cannot predict them; with --bpp, the default is to try all three (a search of seconds); "
+                   "--bpp with fast searches only the quality (and the residual at high rates): tens of ms")
     p.add_argument("--residual", type=int_in(QUALITY_RANGE), metavar="Q",
                    help="quality 1..100 of the residual layer: every view's prediction "
                    "error coded as one AV1 sequence "

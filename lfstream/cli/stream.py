@@ -24,7 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target bits per pixel: rate control on the first frame")
     p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG), balanced "
                    "or best (AV1). Default: fast from 7x7 views up, AV1 below, and the views as one AV1 sequence "
-                   "where the first frame shows that warping cannot predict them; with --bpp, every preset")
+                   "where the first frame shows that warping cannot predict them; with --bpp, every preset "
+                   "(seconds on the first frame; --bpp with fast: the quick search, tens of ms)")
     p.add_argument("--no-depth-hint", action="store_true", help="send only the centre view")
     p.add_argument("--residual", type=int_in(QUALITY_RANGE), metavar="Q",
                    help="quality 1..100 of the residual layer: every view's prediction "

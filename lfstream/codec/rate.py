@@ -86,6 +86,22 @@ HINT_COARSEN_MAX_LOSS_DB = 0.2
 #: +0.0077 on seahorse, bikes, translucent), balanced +0.42...+2.16 dB / +0.0050...+0.0589;
 #: 7x7 and up, fast meets x265 medium on every 7x7 sample (bench/codec.py).
 DEFAULT_PRESET_BY_VIEWS = ((9, "best"), (48, "balanced"))
+#: Rate control's searches: ``quick`` codes every frame once in the default's configuration
+#: (:func:`choose_default` under the named preset) and searches the centre view's quality, and
+#: the residual's where the centre cannot spend the target (:func:`_quick_configuration`);
+#: ``full`` tries every preset, hint precision, the residual layer and the views modes, and
+#: decodes each candidate to keep the best measured one. The quick search is the ``fast``
+#: preset's.
+SEARCHES = ("quick", "full")
+#: The quick search adds the residual layer where the centre view alone needs a quality above
+#: this: past it a JPEG spends its bits on a view the warp then blurs (lytro_bikes at 0.08
+#: bpp: q96 alone 33.17 dB, q88 with a residual 34.85; at 0.04 q85 alone loses 0.38 dB MPSNR
+#: to a residual but wins 0.014 MSSIM).
+QUICK_MAX_CENTRE_QUALITY = 90
+#: ... and tries the hint at twice the scale and no hint where the hint takes at least this
+#: share of the target (lytro_bikes at 0.005 and 0.01 bpp, where the 1/4 hint is 53-100 % of
+#: the target: the 1/8 one gives +0.4...+2.2 dB; cotton at 0.01: no hint +4.3 dB).
+QUICK_HINT_SHARE = 0.2
 #: Relative size change per quality step the follower assumes (AV1 centre views measured 3-5 %,
 #: JPEG 1.5-3 % around the qualities rate control picks).
 FOLLOW_STEP_GROWTH = 0.04
@@ -99,7 +115,7 @@ class RateChoice:
     quality: int
     depth_hint: bool
     bpp: float
-    mpsnr_first_frame: float
+    mpsnr_first_frame: float | None  # None: not measured (the quick search measures sizes only)
     candidates: tuple[dict, ...]
     header: StreamHeader
     packets: tuple[Packet, ...]
@@ -201,10 +217,10 @@ def uses_default_choice(preset: str | None, depth_hint: bool, residual: int | No
 
 def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | None = None,
                    hint_options: HintOptions | None = None, gain_grid: int = 4, views_hint: bool = False,
-                   post_filter: bool = True) -> DefaultChoice:
+                   post_filter: bool = True, preset: str | None = None) -> DefaultChoice:
     """The default encode's configuration for a stream whose first frame is ``frame``: the
     hint and the centre view coded by :func:`default_preset` (the fast JPEG from 7x7 views
-    up, AV1 with fewer), unless the prediction of the views misses by far
+    up, AV1 with fewer; ``preset`` names another), unless the prediction of the views misses by far
     (:data:`PREDICTION_FLOOR_DB`), then the views coded as one AV1 sequence keyed by the
     centre view (``balanced`` preset, ``views`` at ``quality``; the hint only with
     ``views_hint``). The fast encoder's work on frame 0 is kept (``first``): the check costs
@@ -217,7 +233,7 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
 
     opts = hint_options or HintOptions()
     enc = Encoder(quality=quality, depth_hint=True, hint_options=opts, gain_grid=gain_grid,
-                  preset=default_preset(frame.shape[:2], frame.shape[2:4]), post_filter=post_filter)
+                  preset=preset or default_preset(frame.shape[:2], frame.shape[2:4]), post_filter=post_filter)
     first = enc.encode_frame(frame, 0, 0, present)
     u, v = frame.shape[:2]
     cells = min(frame.shape[2:4]) // enc.last_hint.scale
@@ -409,9 +425,117 @@ def follow_rate(quality: int, target_bpp: float, spent_bits: float, done_pixels:
     return int(np.clip(quality + step, lo, hi))
 
 
+def _first_frame_mpsnr(frames: np.ndarray, present: np.ndarray | None, header: StreamHeader,
+                       packets: list[Packet]) -> float:
+    """MPSNR (dB, at most 100) of a candidate stream's first frame (a key frame) as decoded."""
+    from lfstream.codec.decoder import decode
+    from lfstream.metrics import mpsnr
+
+    first = pack_header(header) + pack_packet(packets[0], header.version)
+    return float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
+
+
+def _choice(candidates: list[dict], target_bpp: float) -> RateChoice:
+    """The candidate within :data:`RATE_TOLERANCE` of the target with the best measured
+    first-frame MPSNR (else the nearest to the target), as a :class:`RateChoice`."""
+    def rank(c: dict) -> tuple:
+        off = abs(c["bpp"] - target_bpp) / target_bpp
+        measured = c["mpsnr_first_frame"] if c["mpsnr_first_frame"] is not None else 0.0
+        return (off > RATE_TOLERANCE, -measured if off <= RATE_TOLERANCE else off)
+
+    best = min(candidates, key=rank)
+    header_q, packets_q, opts_q = best["_stream"]
+    report = tuple({k: v for k, v in c.items() if k != "_stream"} for c in candidates)
+    return RateChoice(best["quality"], best["depth_hint"], best["bpp"], best["mpsnr_first_frame"], report, header_q,
+                      packets_q, best["preset"], opts_q, best["residual"], best["residual_mode"] or "prediction")
+
+
+def _quick_configuration(frames: np.ndarray, target_bpp: float, fps: float, present: np.ndarray | None,
+                         hint_options: HintOptions | None, gain_grid: int, preset: str,
+                         residual: bool) -> RateChoice | None:
+    """Rate control's quick search (:data:`SEARCHES`) under ``preset``: the default's
+    configuration of the first frame (:func:`choose_default`: the hint, at 1/8 of the view
+    where that predicts as well as at 1/4), every frame coded once, then only the centre
+    view's quality searched to the target (:func:`_best_quality`: about five centre-view
+    encodes). Two kinds of rates need more:
+
+    - low, where the hint takes :data:`QUICK_HINT_SHARE` of the target or more: the hint at
+      twice the scale and no hint are candidates too (their centre views get those bytes);
+    - high, where even the best centre view leaves more than :data:`RATE_TOLERANCE` of the
+      target unspent or needs a quality above :data:`QUICK_MAX_CENTRE_QUALITY` (the
+      prediction saturates): the residual layer fills the rest, the centre at the larger of
+      :data:`RESIDUAL_SHARES`.
+
+    Where more than one candidate lands within the tolerance, each first frame is decoded
+    and the better MPSNR wins, as in the full search; one candidate is not decoded
+    (``mpsnr_first_frame`` ``None``). ``None`` where nothing lands within the tolerance or
+    the prediction fails (the default would code the views): the full search decides there.
+    """
+    from lfstream.codec.encoder import Encoder
+    from lfstream.metrics import bpp
+
+    views, size = tuple(frames.shape[1:3]), tuple(frames.shape[3:5])
+    target_bytes = target_bpp * int(np.prod(frames.shape[:5])) / 8.0
+    choice = choose_default(frames[0], 50, present, hint_options, gain_grid, post_filter=False, preset=preset)
+    if choice.codes_views:
+        return None
+    enc = choice.encoder
+    opts = enc.hint_options
+
+    def coded(encoder: Encoder, first: Packet | None = None) -> list[Packet]:
+        return [first if t == 0 and first is not None else encoder.encode_frame(f, t, int(round(t * 1e6 / fps)), present)
+                for t, f in enumerate(frames)]
+
+    candidates: list[dict] = []
+
+    def add(q: int, r: int | None, at_q: StreamHeader, moved: list[Packet], hint: HintOptions | None) -> None:
+        got = _stream_bytes(at_q, moved)
+        if abs(got - target_bytes) <= RATE_TOLERANCE * target_bytes:
+            candidates.append({"preset": preset, "quality": q, "depth_hint": hint is not None,
+                               "hint_scale": None if hint is None else hint.hint_scale, "residual": r,
+                               "residual_mode": None if r is None else "prediction", "bpp": bpp(got, frames.shape),
+                               "mpsnr_first_frame": None, "_stream": (at_q, tuple(moved), hint or HintOptions())})
+
+    def centre_only(encoder: Encoder, packets: list[Packet], hint: HintOptions | None) -> tuple[int, int]:
+        header = encoder.header(views, size, fps)
+        q, images = _best_quality(frames, packets, header, target_bytes, encoder.coding, encoder.hint_options.key_interval)
+        at_q, moved = _at_quality(header, packets, q, images, encoder.coding)
+        add(q, None, at_q, moved, hint)
+        return q, _stream_bytes(at_q, moved)
+
+    packets = coded(enc, choice.first)
+    q, got = centre_only(enc, packets, opts)
+    if sum(len(p.hint) for p in packets) >= QUICK_HINT_SHARE * target_bytes:
+        coarse = replace(opts, hint_scale=2 * opts.hint_scale)
+        if hint_options is None and min(size) // coarse.hint_scale >= PREDICTION_CHECK_MIN_CELLS:
+            enc_c = Encoder(quality=50, depth_hint=True, hint_options=coarse, gain_grid=gain_grid, preset=preset,
+                            post_filter=False)
+            centre_only(enc_c, coded(enc_c), coarse)
+        enc_n = Encoder(quality=50, depth_hint=False, gain_grid=gain_grid, preset=preset, post_filter=False)
+        centre_only(enc_n, coded(enc_n), None)
+    saturated = got < target_bytes * (1 - RATE_TOLERANCE) or q > QUICK_MAX_CENTRE_QUALITY
+    if saturated and residual and views[0] * views[1] > 1 and av1_fits(size):
+        enc_r = Encoder(quality=50, depth_hint=True, hint_options=opts, gain_grid=gain_grid, preset=preset,
+                        residual=1)
+        header_r = enc_r.header(views, size, fps)
+        q_r, images = _best_quality(frames, packets, header_r, RESIDUAL_SHARES[-1] * target_bytes, enc_r.coding,
+                                    opts.key_interval)
+        found = _residual_candidate(frames, packets, header_r, q_r, images, enc_r.coding, preset, opts, gain_grid,
+                                    target_bytes)
+        if found is not None:
+            add(q_r, found[0], found[1], found[2], opts)
+    if not candidates:
+        return None
+    if len(candidates) > 1:
+        for c in candidates:
+            c["mpsnr_first_frame"] = _first_frame_mpsnr(frames, present, c["_stream"][0], list(c["_stream"][1]))
+    return _choice(candidates, target_bpp)
+
+
 def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, present: np.ndarray | None = None,
                          hint_options: HintOptions | None = None, gain_grid: int = 4,
-                         preset: str | None = None, residual: bool = True, views_hint: bool = False) -> RateChoice:
+                         preset: str | None = None, residual: bool = True, views_hint: bool = False,
+                         search: str | None = None) -> RateChoice:
     """The (preset, quality, depth hint, hint precision, residual) whose stream lands nearest
     ``target_bpp`` with the best first-frame MPSNR (see the module docstring). ``preset``:
     the only preset to consider; ``None`` considers every preset (and the residual layer
@@ -419,19 +543,26 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     ``None`` tries the default and a 1/8-resolution hint. ``residual``: whether residual
     candidates are tried (they cost a decode and several AV1 sequence encodes per frame).
     ``views_hint``: a candidate that codes the views themselves carries the depth hint too
-    (a stream fits its focal planes to it; the views do not need it).
+    (a stream fits its focal planes to it; the views do not need it). ``search``: one of
+    :data:`SEARCHES`; ``None``: ``quick`` under the ``fast`` preset (a fast encode is what it
+    promises), ``full`` otherwise.
 
     Shape:
         - frames: ``(T, U, V, H, W, 3)``
     """
-    from lfstream.codec.decoder import decode
     from lfstream.codec.encoder import PRESETS, Encoder, preset_coding
-    from lfstream.metrics import bpp, mpsnr
+    from lfstream.metrics import bpp
 
     if not (np.isfinite(target_bpp) and target_bpp > 0):
         raise LFValueError(f"bpp: a positive target in bits per pixel, got {target_bpp!r}")
+    if search is not None and search not in SEARCHES:
+        raise LFValueError(f"search: one of {', '.join(SEARCHES)}, got {search!r}")
     if preset is not None:
         preset_coding(preset)  # an unknown name fails before any encoding
+    if preset is not None and (search or ("quick" if preset == "fast" else "full")) == "quick":
+        quick = _quick_configuration(frames, target_bpp, fps, present, hint_options, gain_grid, preset, residual)
+        if quick is not None:
+            return quick
     presets = tuple(PRESETS) if preset is None else (preset,)
     if not av1_fits(frames.shape[3:5]):  # views too small for AV1: the JPEG preset alone, no residual
         if preset not in (None, "fast"):
@@ -442,15 +573,12 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     target_bytes = target_bpp * pixels / 8.0
     candidates = []
 
-    def measure(at_q: StreamHeader, moved: list[Packet]) -> float:
-        first = pack_header(at_q) + pack_packet(moved[0], at_q.version)  # the first frame is a key frame
-        return float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
-
     def add(name: str, q: int, hint_scale: int | None, r: int | None, mode: str | None, at_q: StreamHeader,
             moved: list[Packet], opts: HintOptions) -> None:
         candidates.append({"preset": name, "quality": q, "depth_hint": at_q.has_hint, "hint_scale": hint_scale,
                            "residual": r, "residual_mode": mode, "bpp": bpp(_stream_bytes(at_q, moved), frames.shape),
-                           "mpsnr_first_frame": measure(at_q, moved), "_stream": (at_q, tuple(moved), opts)})
+                           "mpsnr_first_frame": _first_frame_mpsnr(frames, present, at_q, moved),
+                           "_stream": (at_q, tuple(moved), opts)})
 
     hints = [hint_options] if hint_options is not None else [HintOptions(), HintOptions(hint_scale=COARSE_HINT_SCALE)]
     res_preset = RESIDUAL_PRESET if preset is None else preset
@@ -488,19 +616,11 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
                 q, at_q, moved = found
                 add(res_preset, q, HintOptions().hint_scale if views_hint else None, q, mode, at_q, moved, HintOptions())
 
-    # within the tolerance where possible, then the better measured quality
-    def rank(c: dict) -> tuple:
-        off = abs(c["bpp"] - target_bpp) / target_bpp
-        return (off > RATE_TOLERANCE, -c["mpsnr_first_frame"] if off <= RATE_TOLERANCE else off)
-
-    best = min(candidates, key=rank)
-    header_q, packets_q, opts_q = best["_stream"]
-    report = tuple({k: v for k, v in c.items() if k != "_stream"} for c in candidates)
-    return RateChoice(best["quality"], best["depth_hint"], best["bpp"], best["mpsnr_first_frame"], report, header_q,
-                      packets_q, best["preset"], opts_q, best["residual"], best["residual_mode"] or "prediction")
+    return _choice(candidates, target_bpp)
 
 
-__all__ = ["RATE_TOLERANCE", "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "FOLLOW_MAX_STEP",
+__all__ = ["RATE_TOLERANCE", "SEARCHES", "QUICK_MAX_CENTRE_QUALITY", "QUICK_HINT_SHARE",
+           "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "FOLLOW_MAX_STEP",
            "FOLLOW_DEADBAND", "FOLLOW_STEP_GROWTH", "PREDICTION_FLOOR_DB", "PREDICTION_CHECK_MIN_CELLS",
            "HINT_COARSEN_MAX_LOSS_DB", "DEFAULT_PRESET_BY_VIEWS", "default_preset",
            "RateChoice", "DefaultChoice",

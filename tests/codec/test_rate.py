@@ -263,3 +263,72 @@ def test_the_default_keeps_the_finer_hint_for_thin_structures():
     lf = np.asarray(lfstream.read_lf(shared("lytro_bikes")))
     choice = choose_default(lf)
     assert choice.encoder.hint_options.hint_scale == 4 and choice.encoder.last_hint.scale == 4
+
+
+def test_the_fast_presets_quick_search_codes_each_frame_once_and_is_the_encoders_stream(scene, monkeypatch):
+    """Under --preset fast rate control searches the centre view's quality only where that
+    lands the target: no residual encoded, nothing decoded, one candidate; its stream is
+    the encoder's with the chosen quality byte for byte."""
+    import lfstream.codec.residual as residual_mod
+    from lfstream.codec.encoder import Encoder
+
+    calls = {"frames": 0}
+    real = Encoder.encode_frame
+
+    def counted(self, *a, **k):
+        calls["frames"] += 1
+        return real(self, *a, **k)
+
+    def no_residual(*a, **k):
+        raise AssertionError("the quick search coded a residual where the centre view lands the target")
+
+    monkeypatch.setattr(Encoder, "encode_frame", counted)
+    monkeypatch.setattr(residual_mod, "encode_residual", no_residual)
+    choice = choose_configuration(scene, 0.12, 30.0, preset="fast")
+    assert abs(choice.bpp - 0.12) / 0.12 <= RATE_TOLERANCE
+    assert calls["frames"] == len(scene)  # every frame coded once (the default's check reuses frame 0)
+    assert len(choice.candidates) == 1 and choice.mpsnr_first_frame is None and choice.residual is None
+    monkeypatch.undo()
+    data = lfstream.encode(scene, quality=choice.quality, preset="fast", hint_options=choice.hint_options)
+    assert choice.stream() == data
+    full = choose_configuration(scene, 0.12, 30.0, preset="fast", search="full")
+    same = [c for c in full.candidates if (c["quality"], c["hint_scale"], c["residual"]) ==
+            (choice.quality, choice.hint_options.hint_scale, None)]
+    assert same and same[0]["bpp"] == pytest.approx(choice.bpp, rel=1e-12)  # one of the full search's candidates
+
+
+def test_the_quick_search_adds_the_residual_where_the_centre_saturates_and_keeps_the_better(scene):
+    """At a rate the centre view alone reaches only near quality 100 the residual layer is a
+    candidate; both are decoded and the better first frame wins."""
+    from lfstream.codec.rate import QUICK_MAX_CENTRE_QUALITY
+
+    choice = choose_configuration(scene, 0.24, 30.0, preset="fast")
+    alone = [c for c in choice.candidates if c["residual"] is None]
+    assert alone and alone[0]["quality"] > QUICK_MAX_CENTRE_QUALITY
+    assert any(c["residual"] is not None for c in choice.candidates)
+    inside = [c for c in choice.candidates if abs(c["bpp"] - 0.24) / 0.24 <= RATE_TOLERANCE]
+    assert len(inside) >= 2 and choice.mpsnr_first_frame == max(c["mpsnr_first_frame"] for c in inside)
+    first = lfstream.decode(lfstream.encode(scene[:1], quality=choice.quality, preset="fast",
+                                            hint_options=choice.hint_options, residual=choice.residual))[0]
+    assert float(mpsnr(scene[0], first)) == pytest.approx(choice.mpsnr_first_frame, abs=1e-6)
+
+
+def test_the_quick_search_weighs_the_hint_where_it_is_much_of_the_budget(scene, monkeypatch):
+    """Where the hint is a large share of the target, no hint is a candidate too (its
+    centre view gets those bytes), measured like the full search's."""
+    import lfstream.codec.rate as rate
+
+    monkeypatch.setattr(rate, "QUICK_HINT_SHARE", 0.0)
+    choice = choose_configuration(scene, 0.12, 30.0, preset="fast")
+    assert {c["depth_hint"] for c in choice.candidates} == {True, False}
+    assert all(c["mpsnr_first_frame"] is not None for c in choice.candidates)
+    inside = [c for c in choice.candidates if abs(c["bpp"] - 0.12) / 0.12 <= RATE_TOLERANCE]
+    assert choice.mpsnr_first_frame == max(c["mpsnr_first_frame"] for c in inside)
+
+
+def test_the_quick_search_leaves_unpredictable_views_to_the_full_search(unpredictable):
+    choice = choose_configuration(unpredictable[None], 0.4, 30.0, preset="fast")
+    assert len(choice.candidates) > 1  # the full search ran: the views modes are among its candidates
+    assert any(c["residual_mode"] in ("views", "half-views") for c in choice.candidates)
+    with pytest.raises(LFValueError, match="search"):
+        choose_configuration(unpredictable[None], 0.4, 30.0, preset="fast", search="thorough")
