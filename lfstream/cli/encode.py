@@ -43,6 +43,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     hint.add_argument("--no-depth-hint", dest="depth_hint", action="store_false",
                       help="send only the JPEG centre view (fewest bits, flat reconstruction)")
     p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate to record (default: the input's, else 30)")
+    p.add_argument("--device", default="cpu", help="where the hint's plane sweep runs: cpu (the default) or cuda "
+                   "(rate control, --bpp, sweeps on the cpu)")
     p.add_argument("--overwrite", action="store_true")
     add_read_options(p)
     p.add_argument("--json", action="store_true")
@@ -54,8 +56,10 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.errors import LFValueError
     from lfstream.io._fs import check_new_file
     from lfstream.metrics import bpp
+    from lfstream.models.device import check_device
 
     check_new_file(args.output, args.overwrite)
+    check_device(args.device)  # a bad device fails before any reading or encoding
     loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
     frames = frames_of(loaded.lf)
     fps = args.fps or loaded.fps or 30.0
@@ -82,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         # the default: the centre's coding by the number of views, or the views themselves
         # where the prediction misses them
         t0 = time.perf_counter()
-        choice = choose_default(frames[0], quality, loaded.present)
+        choice = choose_default(frames[0], quality, loaded.present, device=args.device)
         first_s = time.perf_counter() - t0
         enc = choice.encoder
         preset, depth_hint, residual, residual_mode = enc.preset, enc.depth_hint, enc.residual, enc.residual_mode
@@ -94,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]),
                             Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
-                                    residual_mode=residual_mode), fps=fps,
+                                    residual_mode=residual_mode, device=args.device), fps=fps,
                             present=loaded.present)
     result = dataclasses.asdict(stats)
     result.update({"output": str(args.output), "bpp": bpp(stats.bytes, frames.shape),

@@ -90,6 +90,9 @@ class Encoder:
             7-11 ms a 375 x 540 view on the first frame and every hint key frame after it,
             nothing on the frames between); ``False`` leaves every frame at the default
             filter, the bytes of earlier versions.
+        device: where the hint's plane sweep runs: ``"cpu"`` (the kernels) or ``"cuda"``
+            (tensor operations, :mod:`lfstream.codec.sweep_batched`; the maps agree to float
+            rounding, so the bytes may differ in a rare hint cell).
     """
 
     quality: int = 50
@@ -100,8 +103,12 @@ class Encoder:
     residual: int | None = None
     residual_mode: str = "prediction"
     post_filter: bool = True
+    device: str = "cpu"
 
     def __post_init__(self) -> None:
+        from lfstream.models.device import check_device
+
+        self.device = check_device(self.device)
         self.coding = preset_coding(self.preset)
         if self.residual is not None or self.residual_mode != "prediction":
             from lfstream.codec.residual import check_residual_mode, check_residual_quality
@@ -117,7 +124,7 @@ class Encoder:
         if not isinstance(self.gain_grid, (int, np.integer)) or not 0 <= self.gain_grid <= 64:
             raise LFValueError(f"gain_grid: an integer in 0..64, got {self.gain_grid!r}")
         self.hint_options.validate()
-        self._hints = HintTracker(self.hint_options)
+        self._hints = HintTracker(self.hint_options, self.device)
         self._gains = GainTracker(self.hint_options.key_interval)  # key maps with the key hints' interval
         self._post_filters = PostFilterChooser(self.hint_options.key_interval)
         self.last_gains: np.ndarray | None = None  # the last frame's gain maps as measured (None: none sent)
@@ -336,6 +343,7 @@ def encode(
     residual: int | None = None,
     residual_mode: str = "prediction",
     post_filter: bool = True,
+    device: str = "cpu",
 ) -> bytes:
     """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
 
@@ -355,7 +363,8 @@ def encode(
     ``None`` (the default) for none; ``residual_mode``: what it codes (``prediction`` or
     ``views``, :attr:`Encoder.residual_mode`). ``post_filter``: name the decoder's JPEG
     post-filter the encoder measured best (:attr:`Encoder.post_filter`; ``False``: the
-    default filter, 7-11 ms less per key frame).
+    default filter, 7-11 ms less per key frame). ``device``: where the hint's plane sweep
+    runs (:attr:`Encoder.device`; rate control's searches sweep on the CPU).
 
     Raises:
         LFStreamError: bad shape, dtype, non-finite values or parameters.
@@ -380,12 +389,13 @@ def encode(
     first = None
     if uses_default_choice(preset, depth_hint, residual, residual_mode):
         check_lf(frames[0], allow_video=False)
-        choice = choose_default(frames[0], quality, present, hint_options, gain_grid, post_filter=post_filter)
+        choice = choose_default(frames[0], quality, present, hint_options, gain_grid, post_filter=post_filter,
+                                device=device)
         enc, first = choice.encoder, choice.first
     else:
         enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(),
                       gain_grid=gain_grid, preset=preset or DEFAULT_PRESET, residual=residual,
-                      residual_mode=residual_mode, post_filter=post_filter)
+                      residual_mode=residual_mode, post_filter=post_filter, device=device)
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
     for t, frame in enumerate(frames):

@@ -238,9 +238,17 @@ def _coarser(images: np.ndarray, factor: int) -> np.ndarray:
                      for img in images])
 
 
+def sweeps_on_device(device: str | None) -> bool:
+    """Whether a sweep on ``device`` runs as tensor operations
+    (:func:`lfstream.codec.sweep_batched.sweep_batched`: a CUDA device) rather than the CPU
+    kernels (``None`` or ``"cpu"``)."""
+    return device is not None and str(device).startswith("cuda")
+
+
 def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale: int, options: HintOptions,
-           max_candidates: int = 128) -> np.ndarray:
-    """Disparity (px of the full view per view step) at the resolution of ``images``."""
+           max_candidates: int = 128, device: str | None = None) -> np.ndarray:
+    """Disparity (px of the full view per view step) at the resolution of ``images``; on a
+    CUDA ``device`` the same sweep as tensor operations (:func:`sweeps_on_device`)."""
     from lfstream.codec._kernels import sweep_cost, winner_subpixel
 
     reach = float(np.abs(offsets).max()) or 1.0
@@ -250,6 +258,10 @@ def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale:
         n, step = max_candidates, (hi - lo) / (max_candidates - 1)
     n = max(n, 3)
     cands = (lo + step * np.arange(n)).astype(np.float32)
+    if sweeps_on_device(device):
+        from lfstream.codec.sweep_batched import sweep_batched
+
+        return sweep_batched(images, offsets, cands, scale, options.box_radius, device)
     cost = np.empty((len(cands), *images.shape[1:]), np.float32)
     sweep_cost(images, offsets, cands / np.float32(scale), cost)
     r = options.box_radius
@@ -411,7 +423,7 @@ def scene_range(disparity: np.ndarray, margin: float) -> tuple[float, float]:
 
 def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), present: np.ndarray | None = None,
                       search: tuple[float, float] | None = None, axes: np.ndarray | None = None,
-                      keep_ring_luma: bool = False, keep_coarse: bool = False) -> HintMap:
+                      keep_ring_luma: bool = False, keep_coarse: bool = False, device: str | None = None) -> HintMap:
     """The centre view's disparity at the hint's resolution.
 
     Args:
@@ -426,6 +438,9 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
             encoder asks on key hints, where a stream's first frame is checked).
         keep_coarse: fill :attr:`HintMap.coarse` (block means of the same working map and
             the same median: well under a millisecond).
+        device: ``None`` or ``"cpu"``: the sweep on the CPU kernels; ``"cuda"``: the sweep as
+            tensor operations there (:func:`sweeps_on_device`; the views' luma, the axes and
+            the range pass's texture test stay on the CPU).
 
     Shape:
         - lf: ``(U, V, H, W, C)``
@@ -469,7 +484,7 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
             cs = work * factor
             images = _high_pass(_coarser(grids, factor))
             coarse = _sweep(images, offsets, -options.search_limit, options.search_limit, cs,
-                            HintOptions(step=0.5, box_radius=1))
+                            HintOptions(step=0.5, box_radius=1), device=device)
             # textureless pixels match anywhere: the range comes from the textured ones
             texture = cv2.blur(np.abs(images[0]), (3, 3))
             textured = texture > 0.01
@@ -479,7 +494,7 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     lo, hi = search
     if not hi > lo:
         lo, hi = lo - 0.5, hi + 0.5
-    work_map = _sweep(_high_pass(grids), offsets, lo, hi, work, options)
+    work_map = _sweep(_high_pass(grids), offsets, lo, hi, work, options, device=device)
     disp = _sent_grid(work_map, (h, w), s, work, options.median)
     coarse = _sent_grid(work_map, (h, w), 2 * s, work, options.median) if keep_coarse else None
     return HintMap(disp, s, (float(lo), float(hi)), axes, float(np.abs(grid_offsets).max()) or 1.0, ring_luma,
@@ -615,9 +630,10 @@ class HintTracker:
     "repeat" when nothing changed: a static scene's hint costs a few bytes per frame.
     """
 
-    def __init__(self, options: HintOptions = HintOptions()) -> None:
+    def __init__(self, options: HintOptions = HintOptions(), device: str | None = None) -> None:
         options.validate()
         self.options = options
+        self.device = device  # where the sweep runs (estimate_hint_map)
         self._prev: QuantisedHint | None = None
         self._prev_seq = -1
         self._since_key = 0
@@ -637,14 +653,15 @@ class HintTracker:
         prev = self._prev
         key = prev is None or self._since_key + 1 >= opts.key_interval or seq != self._prev_seq + 1
         hm = estimate_hint_map(lf, opts, present, None if key else self._search, self._axes, keep_ring_luma=key,
-                               keep_coarse=key)
+                               keep_coarse=key, device=self.device)
         self._axes = hm.axes  # a rig's geometry does not change within a video
         if not key:
             lo, hi = self._search
             edge = 0.02 * (hi - lo)
             pressed = float(np.mean((hm.disparity <= lo + edge) | (hm.disparity >= hi - edge)))
             if pressed > 0.02 and opts.max_disparity is None:  # the scene's range changed: search again
-                hm, key = estimate_hint_map(lf, opts, present, axes=self._axes, keep_ring_luma=True), True
+                hm, key = estimate_hint_map(lf, opts, present, axes=self._axes, keep_ring_luma=True,
+                                            device=self.device), True
         payload = None
         if not key and prev.q.shape == hm.disparity.shape and prev.scale == hm.scale \
                 and prev.lo <= float(hm.disparity.min()) and float(hm.disparity.max()) <= prev.hi:
@@ -827,4 +844,4 @@ def disparity_errors(estimate: np.ndarray, truth: np.ndarray, border: int = 15) 
 __all__ = ["HintReferenceError", "HintOptions", "HintMap", "HintTracker", "HintDecoder", "QuantisedHint", "sweep_views",
            "estimate_hint_map", "estimate_disparity",
            "estimate_view_axes", "is_standard", "GEOMETRY_MODES", "encode_hint", "decode_hint", "disparity_errors", "scene_range",
-           "quantise", "level_step"]
+           "quantise", "level_step", "sweeps_on_device"]

@@ -217,10 +217,11 @@ def uses_default_choice(preset: str | None, depth_hint: bool, residual: int | No
 
 def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | None = None,
                    hint_options: HintOptions | None = None, gain_grid: int = 4, views_hint: bool = False,
-                   post_filter: bool = True, preset: str | None = None) -> DefaultChoice:
+                   post_filter: bool = True, preset: str | None = None, device: str = "cpu") -> DefaultChoice:
     """The default encode's configuration for a stream whose first frame is ``frame``: the
     hint and the centre view coded by :func:`default_preset` (the fast JPEG from 7x7 views
-    up, AV1 with fewer; ``preset`` names another), unless the prediction of the views misses by far
+    up, AV1 with fewer; ``preset`` names another; ``device``: where the hint's sweep runs,
+    :attr:`lfstream.codec.encoder.Encoder.device`), unless the prediction of the views misses by far
     (:data:`PREDICTION_FLOOR_DB`), then the views coded as one AV1 sequence keyed by the
     centre view (``balanced`` preset, ``views`` at ``quality``; the hint only with
     ``views_hint``). The fast encoder's work on frame 0 is kept (``first``): the check costs
@@ -233,7 +234,8 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
 
     opts = hint_options or HintOptions()
     enc = Encoder(quality=quality, depth_hint=True, hint_options=opts, gain_grid=gain_grid,
-                  preset=preset or default_preset(frame.shape[:2], frame.shape[2:4]), post_filter=post_filter)
+                  preset=preset or default_preset(frame.shape[:2], frame.shape[2:4]), post_filter=post_filter,
+                  device=device)
     first = enc.encode_frame(frame, 0, 0, present)
     u, v = frame.shape[:2]
     cells = min(frame.shape[2:4]) // enc.last_hint.scale
@@ -253,7 +255,7 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
                 return DefaultChoice(enc, enc.coarsen_first_hint(frame8, first, present), db_coarse)
         return DefaultChoice(enc, first, db)
     views = Encoder(quality=quality, depth_hint=views_hint, hint_options=opts, gain_grid=gain_grid, preset="balanced",
-                    residual=quality, residual_mode="views", post_filter=post_filter)
+                    residual=quality, residual_mode="views", post_filter=post_filter, device=device)
     return DefaultChoice(views, None, db)
 
 
