@@ -102,6 +102,9 @@ QUICK_MAX_CENTRE_QUALITY = 90
 #: share of the target (lytro_bikes at 0.005 and 0.01 bpp, where the 1/4 hint is 53-100 % of
 #: the target: the 1/8 one gives +0.4...+2.2 dB; cotton at 0.01: no hint +4.3 dB).
 QUICK_HINT_SHARE = 0.2
+#: ... and takes the first residual quality whose stream lands within this share of the
+#: target (each probe is an AV1 sequence of every view: 100-250 ms a 7x7x375x540 frame).
+QUICK_NEAR = 0.05
 #: Relative size change per quality step the follower assumes (AV1 centre views measured 3-5 %,
 #: JPEG 1.5-3 % around the qualities rate control picks).
 FOLLOW_STEP_GROWTH = 0.04
@@ -275,7 +278,7 @@ def _at_quality(header: StreamHeader, packets: list[Packet], quality: int, image
     return at_q, [replace(p, image=img) for p, img in zip(packets, images)]
 
 
-def _quality_bracket(size, target_bytes: float) -> tuple[int, int]:
+def _quality_bracket(size, target_bytes: float, near: float = 0.0) -> tuple[int, int]:
     """The bracket ``(lo, hi)``, ``hi = lo + 1``, of qualities around ``target_bytes`` over
     :data:`QUALITY_RANGE`: ``size(lo) <= target_bytes < size(hi)`` where the range allows
     (``size(q)`` grows with ``q``; it caches what it encodes). The same bracket as plain
@@ -284,22 +287,25 @@ def _quality_bracket(size, target_bytes: float) -> tuple[int, int]:
     probe interpolates log-size linearly between the probes nearest the target (a codec's
     sizes are close to log-linear in its quality), strictly inside the bracket. Measured on
     the samples' centre views (80 targets each): 5.0 probes on average instead of 6.7 (AV1
-    4.4-4.7, JPEG 5.2-5.5), at most 9."""
+    4.4-4.7, JPEG 5.2-5.5), at most 9. ``near`` > 0: the search stops at the first probe
+    within that share of the target and returns it as ``(q, q)``."""
     lo, hi = QUALITY_RANGE
     log_target = float(np.log(target_bytes)) if target_bytes > 0 else -np.inf
     known: dict[int, float] = {}  # probed quality -> log size
 
-    def probe(q: int) -> None:
+    def probe(q: int) -> bool:
         nonlocal lo, hi
-        known[q] = float(np.log(max(size(q), 1)))
+        got = size(q)
+        known[q] = float(np.log(max(got, 1)))
         if known[q] <= log_target:
             lo = q
         else:
             hi = q
+        return near > 0 and abs(got - target_bytes) <= near * target_bytes
 
     for _ in range(2):
-        if hi - lo > 1:
-            probe((lo + hi) // 2)
+        if hi - lo > 1 and probe(mid := (lo + hi) // 2):
+            return mid, mid
     while hi - lo > 1:
         below = sorted(q for q in known if known[q] <= log_target)
         above = sorted(q for q in known if known[q] > log_target)
@@ -309,18 +315,26 @@ def _quality_bracket(size, target_bytes: float) -> tuple[int, int]:
         if len(pair) == 2 and known[pair[1]] != known[pair[0]]:
             a, b = pair
             guess = a + (log_target - known[a]) * (b - a) / (known[b] - known[a])
-        probe(int(min(max(round(guess), lo + 1), hi - 1)))
+        q = int(min(max(round(guess), lo + 1), hi - 1))
+        if probe(q):
+            return q, q
     return lo, hi
 
 
-def _fitting_quality(size, target_bytes: float) -> int | None:
+def _fitting_quality(size, target_bytes: float, near: float = 0.0) -> int | None:
     """Of the bracket around ``target_bytes`` (:func:`_quality_bracket`), the quality whose
     ``size`` is nearest the target without passing it by more than :data:`RATE_TOLERANCE`;
-    ``None`` when even the lowest quality does not fit."""
-    if size(QUALITY_RANGE[0]) > target_bytes * (1 + RATE_TOLERANCE):
+    ``None`` when even the lowest quality does not fit. ``near`` > 0 (the quick search): the
+    first probe within that share of the target is taken, and the lowest quality is encoded
+    only where every probe passed the target."""
+    limit = target_bytes * (1 + RATE_TOLERANCE)
+    if near <= 0 and size(QUALITY_RANGE[0]) > limit:
         return None
-    fits = [q for q in _quality_bracket(size, target_bytes) if size(q) <= target_bytes * (1 + RATE_TOLERANCE)]
-    return min(fits, key=lambda k: abs(size(k) - target_bytes))
+    bracket = _quality_bracket(size, target_bytes, near)
+    if near > 0 and bracket[0] == QUALITY_RANGE[0] and size(QUALITY_RANGE[0]) > limit:
+        return None
+    fits = [q for q in sorted(set(bracket)) if size(q) <= limit]
+    return min(fits, key=lambda k: abs(size(k) - target_bytes)) if fits else None
 
 
 def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeader, target_bytes: float,
@@ -348,10 +362,11 @@ def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeade
 
 def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: StreamHeader, quality: int,
                         images: list[bytes], coding: CentreCoding, preset: str, opts: HintOptions,
-                        gain_grid: int, target_bytes: float) -> tuple[int, StreamHeader, list[Packet]] | None:
+                        gain_grid: int, target_bytes: float,
+                        near: float = 0.0) -> tuple[int, StreamHeader, list[Packet]] | None:
     """The residual quality whose stream (centre at ``quality``) is closest to the target
     without passing it by more than :data:`RATE_TOLERANCE`; ``None`` when even quality 1
-    does not fit."""
+    does not fit. ``near``: :func:`_fitting_quality`'s early stop."""
     from lfstream.codec.encoder import RESIDUAL_SPEED, Encoder, residual_meta
     from lfstream.codec.residual import encode_residual
 
@@ -370,7 +385,7 @@ def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: Strea
             cache[r] = (base + sum(len(x) for x in payloads), payloads)
         return cache[r][0]
 
-    r = _fitting_quality(size, target_bytes)
+    r = _fitting_quality(size, target_bytes, near)
     if r is None:
         return None
     meta = {**at_q.meta, "residual": residual_meta(r, RESIDUAL_SPEED[preset])}
@@ -466,7 +481,8 @@ def _quick_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     - high, where even the best centre view leaves more than :data:`RATE_TOLERANCE` of the
       target unspent or needs a quality above :data:`QUICK_MAX_CENTRE_QUALITY` (the
       prediction saturates): the residual layer fills the rest, the centre at the larger of
-      :data:`RESIDUAL_SHARES`.
+      :data:`RESIDUAL_SHARES`, its quality the first probe within :data:`QUICK_NEAR` of the
+      target.
 
     Where more than one candidate lands within the tolerance, each first frame is decoded
     and the better MPSNR wins, as in the full search; one candidate is not decoded
@@ -523,7 +539,7 @@ def _quick_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         q_r, images = _best_quality(frames, packets, header_r, RESIDUAL_SHARES[-1] * target_bytes, enc_r.coding,
                                     opts.key_interval)
         found = _residual_candidate(frames, packets, header_r, q_r, images, enc_r.coding, preset, opts, gain_grid,
-                                    target_bytes)
+                                    target_bytes, near=QUICK_NEAR)
         if found is not None:
             add(q_r, found[0], found[1], found[2], opts)
     if not candidates:
@@ -621,7 +637,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     return _choice(candidates, target_bpp)
 
 
-__all__ = ["RATE_TOLERANCE", "SEARCHES", "QUICK_MAX_CENTRE_QUALITY", "QUICK_HINT_SHARE",
+__all__ = ["RATE_TOLERANCE", "SEARCHES", "QUICK_MAX_CENTRE_QUALITY", "QUICK_HINT_SHARE", "QUICK_NEAR",
            "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "FOLLOW_MAX_STEP",
            "FOLLOW_DEADBAND", "FOLLOW_STEP_GROWTH", "PREDICTION_FLOOR_DB", "PREDICTION_CHECK_MIN_CELLS",
            "HINT_COARSEN_MAX_LOSS_DB", "DEFAULT_PRESET_BY_VIEWS", "default_preset",

@@ -332,3 +332,27 @@ def test_the_quick_search_leaves_unpredictable_views_to_the_full_search(unpredic
     assert any(c["residual_mode"] in ("views", "half-views") for c in choice.candidates)
     with pytest.raises(LFValueError, match="search"):
         choose_configuration(unpredictable[None], 0.4, 30.0, preset="fast", search="thorough")
+
+
+def test_the_quick_search_stops_at_the_first_probe_near_the_target():
+    """``near``: the first probe within that share of the target is taken (fewer AV1
+    sequence encodes), the lowest quality probed only where every probe passed the target."""
+    from lfstream.codec.rate import _fitting_quality
+
+    sizes = np.exp(np.linspace(np.log(1e3), np.log(1e6), 100))  # log-linear in quality 1..100
+
+    def sized(probed):
+        def size(q):
+            probed.append(q)
+            return float(sizes[q - 1])
+        return size
+
+    for target in (2.3e3, 4.1e4, 7.7e5):
+        full, quick = [], []
+        q_full = _fitting_quality(sized(full), target)
+        q_quick = _fitting_quality(sized(quick), target, near=0.05)
+        assert abs(sizes[q_quick - 1] - target) <= 0.05 * target  # steps of 7 %: a probe lands within 5 %
+        assert abs(sizes[q_full - 1] - target) <= abs(sizes[q_quick - 1] - target) + 1e-9
+        assert len(set(quick)) < len(set(full)) and 1 not in quick
+    never = []
+    assert _fitting_quality(sized(never), 500.0, near=0.05) is None and 1 in never  # even quality 1 passes it
