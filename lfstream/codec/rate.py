@@ -16,7 +16,9 @@ budget was best (35.1 dB; a quarter 34.8, two thirds 35.0, nine tenths 34.1).
 
 The last candidates code the views themselves as the residual's sequence (modes ``views`` and
 ``half-views``, :mod:`lfstream.codec.residual`): where warping cannot predict the scene they
-are the better stream (toys_array), elsewhere the measurement leaves them out.
+are the better stream (toys_array), elsewhere the measurement leaves them out. A residual's or
+the views' quality search stops at the first probe within :data:`PROBE_NEAR` of the target
+(each probe is an AV1 sequence of every view).
 
 A stream sees one frame at a time: it chooses on its first frame and then follows the
 budget frame by frame (:func:`follow_rate`).
@@ -102,9 +104,13 @@ QUICK_MAX_CENTRE_QUALITY = 90
 #: share of the target (lytro_bikes at 0.005 and 0.01 bpp, where the 1/4 hint is 53-100 % of
 #: the target: the 1/8 one gives +0.4...+2.2 dB; cotton at 0.01: no hint +4.3 dB).
 QUICK_HINT_SHARE = 0.2
-#: ... and takes the first residual quality whose stream lands within this share of the
-#: target (each probe is an AV1 sequence of every view: 100-250 ms a 7x7x375x540 frame).
-QUICK_NEAR = 0.05
+#: Both searches take the first residual (or views) quality whose stream lands within this
+#: share of the target instead of bracketing the nearest: each probe is an AV1 sequence of
+#: every view (100-250 ms a 7x7x375x540 frame at SVT-AV1 preset 12, 0.5-1 s at 4). Measured:
+#: the quick search's probes on synthetic, seahorse, bikes, translucent at 0.04-0.1 bpp 69 ->
+#: 45 for -0.10...0.00 dB; the full search 20-38 % faster on the same scenes at 0.01-0.08 bpp,
+#: -0.07...+0.34 dB.
+PROBE_NEAR = 0.05
 #: Relative size change per quality step the follower assumes (AV1 centre views measured 3-5 %,
 #: JPEG 1.5-3 % around the qualities rate control picks).
 FOLLOW_STEP_GROWTH = 0.04
@@ -482,7 +488,7 @@ def _quick_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     - high, where even the best centre view leaves more than :data:`RATE_TOLERANCE` of the
       target unspent or needs a quality above :data:`QUICK_MAX_CENTRE_QUALITY` (the
       prediction saturates): the residual layer fills the rest, the centre at the larger of
-      :data:`RESIDUAL_SHARES`, its quality the first probe within :data:`QUICK_NEAR` of the
+      :data:`RESIDUAL_SHARES`, its quality the first probe within :data:`PROBE_NEAR` of the
       target; and, with every view present, the views coded as one sequence (mode
       ``views``, searched the same way; the hint only with ``views_hint``).
 
@@ -542,13 +548,13 @@ def _quick_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         q_r, images = _best_quality(frames, packets, header_r, RESIDUAL_SHARES[-1] * target_bytes, enc_r.coding,
                                     opts.key_interval)
         found = _residual_candidate(frames, packets, header_r, q_r, images, enc_r.coding, preset, opts, gain_grid,
-                                    target_bytes, near=QUICK_NEAR)
+                                    target_bytes, near=PROBE_NEAR)
         if found is not None:
             add(q_r, found[0], found[1], found[2], opts)
         if present is None or np.all(present):
             # the views themselves: where warping misses what the residual must then carry
             # (seahorse at 0.04-0.1 bpp: +1.5...+2.4 dB over the residual)
-            views_found = _views_candidate(frames, present, preset, fps, target_bytes, views_hint, near=QUICK_NEAR)
+            views_found = _views_candidate(frames, present, preset, fps, target_bytes, views_hint, near=PROBE_NEAR)
             if views_found is not None:
                 q_v, at_v, moved_v = views_found
                 add(q_v, q_v, at_v, moved_v, HintOptions() if views_hint else None, "views")
@@ -631,7 +637,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
             q, images = _best_quality(frames, packets, header_r, share * target_bytes, enc_r.coding,
                                       opts.key_interval)
             found = _residual_candidate(frames, packets, header_r, q, images, enc_r.coding, res_preset, opts,
-                                        gain_grid, target_bytes)
+                                        gain_grid, target_bytes, near=PROBE_NEAR)
             if found is not None:
                 r, at_q, moved = found
                 add(res_preset, q, opts.hint_scale, r, "prediction", at_q, moved, opts)
@@ -640,7 +646,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         # the views themselves (scenes warping cannot predict: toys_array); not where views
         # are missing: a prediction reconstructs those, a coded sequence would not
         for mode in VIEW_MODES:
-            found = _views_candidate(frames, present, res_preset, fps, target_bytes, views_hint, mode)
+            found = _views_candidate(frames, present, res_preset, fps, target_bytes, views_hint, mode, near=PROBE_NEAR)
             if found is not None:
                 q, at_q, moved = found
                 add(res_preset, q, HintOptions().hint_scale if views_hint else None, q, mode, at_q, moved, HintOptions())
@@ -648,7 +654,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     return _choice(candidates, target_bpp)
 
 
-__all__ = ["RATE_TOLERANCE", "SEARCHES", "QUICK_MAX_CENTRE_QUALITY", "QUICK_HINT_SHARE", "QUICK_NEAR",
+__all__ = ["RATE_TOLERANCE", "SEARCHES", "QUICK_MAX_CENTRE_QUALITY", "QUICK_HINT_SHARE", "PROBE_NEAR",
            "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "FOLLOW_MAX_STEP",
            "FOLLOW_DEADBAND", "FOLLOW_STEP_GROWTH", "PREDICTION_FLOOR_DB", "PREDICTION_CHECK_MIN_CELLS",
            "HINT_COARSEN_MAX_LOSS_DB", "DEFAULT_PRESET_BY_VIEWS", "default_preset",
