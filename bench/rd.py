@@ -14,7 +14,9 @@ HCI "star" scenes as their centre 3x3, the only complete square of views they ha
 Per point: bpp, MPSNR, MSSIM, encode and decode seconds (one timed run after the first;
 the same harness and metric code for every method). Per scene: BD-rate on MPSNR and on
 MSSIM and BD-PSNR of every method against x265 medium (piecewise cubic over the
-overlapping range, lfstream.metrics.bd_rate); one PNG with both curves.
+overlapping range, lfstream.metrics.bd_rate); every lfstream point's encode speed against
+x265 medium's median encode in the same run (the rate-distortion issue's speed target at
+every T); one PNG with both curves.
 
     python bench/rd.py [--json [FILE]] [--quick] [--scenes NAME,...] [--png-dir DIR]
 """
@@ -115,6 +117,13 @@ def baseline_curve(lf: np.ndarray, codec: str, preset: str, params) -> list[dict
     return pts
 
 
+def encode_speed(curves: dict[str, list[dict]]) -> dict[str, list[float]]:
+    """Per lfstream curve, x265 medium's median encode time over its curve divided by each
+    point's encode time (the speed target's ratio, measured in the same run: > 1 is faster)."""
+    anchor = float(np.median([p["encode_s"] for p in curves[ANCHOR]]))
+    return {m: [anchor / max(p["encode_s"], 1e-9) for p in c] for m, c in curves.items() if m.startswith("lfstream")}
+
+
 def bjontegaard(curves: dict[str, list[dict]]) -> dict[str, dict]:
     """Every method against x265 medium; None (with the reason) where the curves do not overlap."""
     a = curves[ANCHOR]
@@ -191,11 +200,16 @@ def main(argv=None) -> dict:
         for method, (codec, preset, params) in BASELINES.items():
             curves[method] = baseline_curve(lf, codec, preset, params)
         bd = bjontegaard(curves)
-        results.append({"scene": name, "shape": list(lf.shape), "curves": curves, "bjontegaard_vs_x265_medium": bd})
+        speed = encode_speed(curves)
+        results.append({"scene": name, "shape": list(lf.shape), "curves": curves, "bjontegaard_vs_x265_medium": bd,
+                        "encode_speed_vs_x265_medium": speed})
         plot(name, curves, args.png_dir / f"rd_{name}.png")
         for method, row in bd.items():
             cells = [f"{k} {v:+7.1f}" if v is not None else f"{k}    n/a" for k, v in row.items() if k != "why"]
             print(f"{name:18s} {method:30s} " + "  ".join(cells), flush=True)
+        for method, ratios in speed.items():
+            print(f"{name:18s} {method:30s} encode speed vs x265 medium (its median encode), per point: "
+                  + " ".join(f"{r:.2f}x" for r in ratios), flush=True)
     return emit(args, results)
 
 
