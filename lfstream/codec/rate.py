@@ -330,14 +330,13 @@ def _quality_bracket(size, target_bytes: float, near: float = 0.0) -> tuple[int,
 def _fitting_quality(size, target_bytes: float, near: float = 0.0) -> int | None:
     """Of the bracket around ``target_bytes`` (:func:`_quality_bracket`), the quality whose
     ``size`` is nearest the target without passing it by more than :data:`RATE_TOLERANCE`;
-    ``None`` when even the lowest quality does not fit. ``near`` > 0 (the quick search): the
-    first probe within that share of the target is taken, and the lowest quality is encoded
-    only where every probe passed the target."""
+    ``None`` when even the lowest quality does not fit (it is encoded only where every probe
+    passed the target). ``near`` > 0: the first probe within that share of the target is
+    taken (:func:`_quality_bracket`; both searches' residual and views use
+    :data:`PROBE_NEAR`)."""
     limit = target_bytes * (1 + RATE_TOLERANCE)
-    if near <= 0 and size(QUALITY_RANGE[0]) > limit:
-        return None
     bracket = _quality_bracket(size, target_bytes, near)
-    if near > 0 and bracket[0] == QUALITY_RANGE[0] and size(QUALITY_RANGE[0]) > limit:
+    if bracket[0] == QUALITY_RANGE[0] and size(QUALITY_RANGE[0]) > limit:
         return None
     fits = [q for q in sorted(set(bracket)) if size(q) <= limit]
     return min(fits, key=lambda k: abs(size(k) - target_bytes)) if fits else None
@@ -368,11 +367,11 @@ def _best_quality(frames: np.ndarray, packets: list[Packet], header: StreamHeade
 
 def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: StreamHeader, quality: int,
                         images: list[bytes], coding: CentreCoding, preset: str, opts: HintOptions,
-                        gain_grid: int, target_bytes: float,
-                        near: float = 0.0) -> tuple[int, StreamHeader, list[Packet]] | None:
-    """The residual quality whose stream (centre at ``quality``) is closest to the target
-    without passing it by more than :data:`RATE_TOLERANCE`; ``None`` when even quality 1
-    does not fit. ``near``: :func:`_fitting_quality`'s early stop."""
+                        gain_grid: int, target_bytes: float) -> tuple[int, StreamHeader, list[Packet]] | None:
+    """The residual quality whose stream (centre at ``quality``) lands within
+    :data:`PROBE_NEAR` of the target (else the nearest without passing it by more than
+    :data:`RATE_TOLERANCE`, :func:`_fitting_quality`); ``None`` when even quality 1 does not
+    fit."""
     from lfstream.codec.encoder import RESIDUAL_SPEED, Encoder, residual_meta
     from lfstream.codec.residual import encode_residual
 
@@ -391,7 +390,7 @@ def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: Strea
             cache[r] = (base + sum(len(x) for x in payloads), payloads)
         return cache[r][0]
 
-    r = _fitting_quality(size, target_bytes, near)
+    r = _fitting_quality(size, target_bytes, PROBE_NEAR)
     if r is None:
         return None
     meta = {**at_q.meta, "residual": residual_meta(r, RESIDUAL_SPEED[preset])}
@@ -400,14 +399,14 @@ def _residual_candidate(frames: np.ndarray, packets: list[Packet], header: Strea
 
 
 def _views_candidate(frames: np.ndarray, present: np.ndarray | None, preset: str, fps: float,
-                     target_bytes: float, hint: bool, mode: str = "views",
-                     near: float = 0.0) -> tuple[int, StreamHeader, list[Packet]] | None:
+                     target_bytes: float, hint: bool, mode: str = "views") -> tuple[int, StreamHeader, list[Packet]] | None:
     """The stream whose residual codes the views themselves (``mode``: ``views`` or
     ``half-views``; no gains; the hint only with ``hint``: it does not shape the views, and costs toys_array 0.003 bpp)
     closest to the target without passing it by more than :data:`RATE_TOLERANCE`:
     the centre view and the views' sequence at one quality (the centre is one view among
     U * V: a better centre would buy 1/(U * V) of the MPSNR), searched like the centre's.
-    ``None`` when even quality 1 does not fit. ``near``: :func:`_fitting_quality`'s early stop."""
+    ``None`` when even quality 1 does not fit. Its quality search stops within
+    :data:`PROBE_NEAR` of the target, as the residual's (:func:`_fitting_quality`)."""
     from lfstream.codec.encoder import Encoder
 
     cache: dict[int, tuple[int, StreamHeader, list[Packet]]] = {}
@@ -420,7 +419,7 @@ def _views_candidate(frames: np.ndarray, present: np.ndarray | None, preset: str
             cache[q] = (_stream_bytes(header, packets), header, packets)
         return cache[q][0]
 
-    q = _fitting_quality(size, target_bytes, near)
+    q = _fitting_quality(size, target_bytes, PROBE_NEAR)
     return None if q is None else (q, cache[q][1], cache[q][2])
 
 
@@ -548,13 +547,13 @@ def _quick_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         q_r, images = _best_quality(frames, packets, header_r, RESIDUAL_SHARES[-1] * target_bytes, enc_r.coding,
                                     opts.key_interval)
         found = _residual_candidate(frames, packets, header_r, q_r, images, enc_r.coding, preset, opts, gain_grid,
-                                    target_bytes, near=PROBE_NEAR)
+                                    target_bytes)
         if found is not None:
             add(q_r, found[0], found[1], found[2], opts)
         if present is None or np.all(present):
             # the views themselves: where warping misses what the residual must then carry
             # (seahorse at 0.04-0.1 bpp: +1.5...+2.4 dB over the residual)
-            views_found = _views_candidate(frames, present, preset, fps, target_bytes, views_hint, near=PROBE_NEAR)
+            views_found = _views_candidate(frames, present, preset, fps, target_bytes, views_hint)
             if views_found is not None:
                 q_v, at_v, moved_v = views_found
                 add(q_v, q_v, at_v, moved_v, HintOptions() if views_hint else None, "views")
@@ -579,7 +578,8 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     ``views_hint``: a candidate that codes the views themselves carries the depth hint too
     (a stream fits its focal planes to it; the views do not need it). ``search``: one of
     :data:`SEARCHES`; ``None``: ``quick`` under the ``fast`` preset (a fast encode is what it
-    promises), ``full`` otherwise.
+    promises), ``full`` otherwise. The quick search searches one named preset: with
+    ``preset=None`` the full search runs whatever ``search`` says.
 
     Shape:
         - frames: ``(T, U, V, H, W, 3)``
@@ -637,7 +637,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
             q, images = _best_quality(frames, packets, header_r, share * target_bytes, enc_r.coding,
                                       opts.key_interval)
             found = _residual_candidate(frames, packets, header_r, q, images, enc_r.coding, res_preset, opts,
-                                        gain_grid, target_bytes, near=PROBE_NEAR)
+                                        gain_grid, target_bytes)
             if found is not None:
                 r, at_q, moved = found
                 add(res_preset, q, opts.hint_scale, r, "prediction", at_q, moved, opts)
@@ -646,7 +646,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         # the views themselves (scenes warping cannot predict: toys_array); not where views
         # are missing: a prediction reconstructs those, a coded sequence would not
         for mode in VIEW_MODES:
-            found = _views_candidate(frames, present, res_preset, fps, target_bytes, views_hint, mode, near=PROBE_NEAR)
+            found = _views_candidate(frames, present, res_preset, fps, target_bytes, views_hint, mode)
             if found is not None:
                 q, at_q, moved = found
                 add(res_preset, q, HintOptions().hint_scale if views_hint else None, q, mode, at_q, moved, HintOptions())
