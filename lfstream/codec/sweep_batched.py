@@ -72,6 +72,9 @@ def sweep_cost_batched(images: torch.Tensor, offsets: torch.Tensor, shifts: torc
     shifts = shifts.to(dev, torch.float32)
     centre, views = images[0], images[1:]
     step = max(1, int(chunk_pixels) // max(1, n_j * h * w))
+    rows = torch.arange(h, device=dev, dtype=torch.float64).view(1, 1, h)
+    columns = torch.arange(w, device=dev).view(1, 1, w)
+    jj = torch.arange(n_j, device=dev).view(1, n_j, 1, 1)
     out = []
     for k0 in range(0, shifts.shape[0], step):
         s = shifts[k0:k0 + step].view(-1, 1)
@@ -79,19 +82,18 @@ def sweep_cost_batched(images: torch.Tensor, offsets: torch.Tensor, shifts: torc
         # the kernel's positions: the row y - s * du rounded once (its compiler fuses the
         # multiply-add; the float64 product of float32 values is exact), the column shift
         # -s * dv the same for every column, so its fraction is one number a view
-        rows = torch.arange(h, device=dev, dtype=torch.float64).view(1, 1, h)
         sy = (rows - (s.double() * offsets[:, 0].double()).unsqueeze(-1)).float()
         y0, y1, ay = _taps(h, sy)
         dx = (-s * offsets[:, 1]).unsqueeze(-1)
-        cols = torch.arange(w, device=dev).view(1, 1, w) + torch.floor(dx).to(torch.int64)
+        dx_floor = torch.floor(dx)
+        cols = columns + dx_floor.to(torch.int64)
         x0, x1 = cols.clamp(0, w - 1), (cols + 1).clamp(0, w - 1)
-        jj = torch.arange(n_j, device=dev).view(1, n_j, 1, 1)
         # the two rows of every output row, each at its two columns: (d, J, h, w) gathers
         r0 = views[jj, y0.unsqueeze(-1), x0.unsqueeze(-2)]
         r0b = views[jj, y0.unsqueeze(-1), x1.unsqueeze(-2)]
         r1 = views[jj, y1.unsqueeze(-1), x0.unsqueeze(-2)]
         r1b = views[jj, y1.unsqueeze(-1), x1.unsqueeze(-2)]
-        ax4 = (dx - torch.floor(dx)).view(d, n_j, 1, 1)
+        ax4 = (dx - dx_floor).view(d, n_j, 1, 1)
         ay4 = ay.unsqueeze(-1)
         top = r0 + ax4 * (r0b - r0)
         bot = r1 + ax4 * (r1b - r1)
