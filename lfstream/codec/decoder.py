@@ -32,10 +32,11 @@ DEPTH_MODES = ("auto", "hint", "flat", "net")
 HANCE_MODES = ("auto", "on", "off")
 # "auto" runs JPEG-Hance only up to this JPEG quality per preset, where it was measured to
 # beat what it replaces. paper: +0.52 dB at q70, -1.35 at q90 (bench/networks.py, seahorse
-# and HCI dino/cotton). fast (trained on real views after the post-filter, judged on scenes
-# it was not trained on: seahorse, cotton, lytro_translucent): over the post-filter on their
-# centre views +0.06..+0.91 dB at q10..q60 (SSIM -0.0001..+0.0016), -1.24..+0.38 at q70..q90
-# (bench/networks.py, 2026-11-23).
+# and HCI dino/cotton). fast (trained on real views after the post-filter, then fine-tuned on
+# the decoded LF; judged on scenes it was not trained on: seahorse, cotton, lytro_translucent):
+# over the post-filter on their centre views +0.07..+0.90 dB at q10..q60 (SSIM +0.0002..+0.0021),
+# +0.05..+0.50 at q70, -0.84..+0.34 at q90; on the decoded LF at q30/50/70 seahorse
+# +0.17/-0.07/-0.21 dB, cotton and lytro_translucent +0.04..+0.32 (bench/networks.py, 2026-11-24).
 HANCE_MAX_QUALITY = {"fast": 60, "paper": 70}
 #: Presets "auto" runs on a CUDA device only: on the 2-core CPU the fast network costs
 #: 84 ms a 375 x 540 view (two threads), 80 % of the rest of a 7x7 decode; ``hance="on"``
