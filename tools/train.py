@@ -672,7 +672,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("model", choices=[*MODEL_NAMES, "all"])
     p.add_argument("--preset", default="fast", choices=["fast", "paper"])
-    p.add_argument("--steps", type=int, help="optimiser steps (default per model)")
+    p.add_argument("--steps", type=int, help="optimiser steps (default per model; each phase)")
     p.add_argument("--batch", type=int)
     p.add_argument("--samples", type=int, default=256, help="synthetic LFs rendered for training")
     p.add_argument("--lr", type=float, help="peak learning rate (default 1e-3; the LF phase 5e-4)")

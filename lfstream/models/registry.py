@@ -11,6 +11,7 @@ the network; a missing or corrupt file raises :class:`lfstream.WeightsError`.
 from __future__ import annotations
 
 import functools
+import io
 import json
 import os
 from dataclasses import asdict, dataclass, fields, is_dataclass
@@ -21,7 +22,7 @@ import torch
 from torch import nn
 
 from lfstream.errors import LFValueError, WeightsError
-from lfstream.io._fs import atomic_path, atomic_write_text
+from lfstream.io._fs import atomic_open, atomic_write_text
 from lfstream.models.layers import count_params
 from lfstream.models.manifest import MANIFEST, WEIGHTS_DIR, manifest_entry, read_manifest, sha256_file  # noqa: F401
 
@@ -146,8 +147,12 @@ def save_checkpoint(model: nn.Module, name: str, preset: str, path: str | os.Pat
     config = model.config
     payload = {"name": name, "preset": preset, "config": asdict(config) if is_dataclass(config) else dict(config),
                "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}}
-    with atomic_path(path) as tmp:
-        torch.save(payload, tmp)
+    # serialised in memory: torch names the archive's root folder after the file it writes,
+    # so saving to the temporary name put the process id into the bytes and the SHA-256
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    with atomic_open(path) as fh:
+        fh.write(buffer.getvalue())
     return sha256_file(path)
 
 

@@ -65,6 +65,20 @@ def test_registry_refuses_duplicates():
         spec("refnet", "huge")
 
 
+def test_saved_weights_are_the_same_bytes_under_any_name(tmp_path):
+    """A checkpoint's SHA-256 (what the manifest records) depends on the weights only, not on
+    the file name or the writing process."""
+    from lfstream.models.registry import save_checkpoint
+
+    model = build_jpeg_hance("fast")
+    a = save_checkpoint(model, "jpeg_hance", "fast", tmp_path / "a.pt")
+    b = save_checkpoint(model, "jpeg_hance", "fast", tmp_path / "other-name.pt")
+    assert a == b
+    torch.nn.init.ones_(model.head.bias)
+    assert save_checkpoint(model, "jpeg_hance", "fast", tmp_path / "a.pt") != a
+    assert torch.equal(load_model("jpeg_hance", "fast", path=tmp_path / "a.pt").head.bias, model.head.bias)
+
+
 def test_corrupt_or_missing_weights_are_clear_errors(tmp_path):
     entry = manifest_entry("jpeg_hance", "fast")
     src = load_model.__globals__["WEIGHTS_DIR"] / entry["file"]

@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
 
 import train  # noqa: E402
 
-from lfstream.models.registry import spec  # noqa: E402
+from lfstream.models.registry import save_checkpoint, spec  # noqa: E402
 from lfstream.synth import SynthConfig, render_clip  # noqa: E402
 
 RECIPE = train.Recipe(model="jpeg_hance", batch=2, crop=32, margin=8, views=4, objective="lf")
@@ -77,3 +77,24 @@ def test_untrained_refiner_loss_is_the_hints_and_the_hint_beats_flat(sample):
     flat = loss(replace(sample, view_maps=np.zeros_like(sample.view_maps)), zero=True)
     # the views are warped with their own maps and offsets: measured 0.59 of flat's MSE
     assert hint < 0.75 * flat
+
+
+@pytest.mark.slow
+def test_two_phase_training_records_the_image_phase_as_the_init(tmp_path):
+    """``tools/train.py jpeg_hance`` (fast): the image phase, then the decoded-LF phase from
+    its weights; the second phase's checkpoint records the first's SHA-256 and recipe."""
+    from lfstream.models.manifest import sha256_file
+    from tests.conftest import shared
+
+    shared("lytro_bikes")  # skips without the samples
+    assert train.main(["jpeg_hance", "--steps", "1", "--out", str(tmp_path)]) == 0
+    first = torch.load(tmp_path / "phase1" / "jpeg_hance-fast.ckpt", weights_only=False)
+    second = torch.load(tmp_path / "phase2" / "jpeg_hance-fast.ckpt", weights_only=False)
+    assert first["recipe"]["objective"] == "image" and first["recipe"]["init"] is None
+    assert second["recipe"]["objective"] == "lf" and second["recipe"]["init"]["recipe"] == first["recipe"]
+    model = spec("jpeg_hance", "fast").build()
+    model.load_state_dict(first["model"])  # the first phase's weights, saved as the tool saves them
+    assert save_checkpoint(model, "jpeg_hance", "fast", tmp_path / "first.pt") == second["recipe"]["init"]["sha256"]
+    # the final weights are the second phase's, and they are not the first phase's
+    assert sha256_file(tmp_path / "jpeg_hance-fast.pt") != second["recipe"]["init"]["sha256"]
+    assert not torch.equal(first["model"]["head.weight"], second["model"]["head.weight"])
