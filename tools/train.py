@@ -42,6 +42,7 @@ for path in (ROOT, ROOT / "bench"):
 from _harness import SHARED, SHARED_SCENES  # noqa: E402  (the shared samples' one table)
 
 from lfstream.codec import jpeg_roundtrip  # noqa: E402
+from lfstream.errors import LFStreamError  # noqa: E402
 from lfstream.lightfield import to_network_input  # noqa: E402
 from lfstream.models.losses import depth_net_loss, hance_loss, refnet_loss  # noqa: E402
 from lfstream.models.registry import MODEL_NAMES, load_model, save_checkpoint, ship_weights, spec  # noqa: E402
@@ -691,9 +692,19 @@ def main(argv: list[str] | None = None) -> int:
                         "JPEG-Hance fast then runs only the phase --objective names")
     p.add_argument("--ship", action="store_true", help="write the final weights into lfstream/weights/")
     args = p.parse_args(argv)
+    names = list(MODEL_NAMES) if args.model == "all" else [args.model]
+    if args.init and (names != ["jpeg_hance"] or not spec("jpeg_hance", args.preset).config.after_deblock):
+        p.error("--init: only jpeg_hance --preset fast (trained on real views) starts from given weights")
+    try:
+        return _train_all(args, names)
+    except LFStreamError as exc:  # a bad --init file, missing samples: one line, not a traceback
+        print(f"train: {exc}", file=sys.stderr)
+        return 2
+
+
+def _train_all(args: argparse.Namespace, names: list[str]) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(max(1, os.cpu_count() or 1))
-    names = list(MODEL_NAMES) if args.model == "all" else [args.model]
     hance = None
     for name in names:
         recipe = Recipe(model=name, preset=args.preset, steps=args.steps or DEFAULT_STEPS[name],

@@ -98,3 +98,13 @@ def test_two_phase_training_records_the_image_phase_as_the_init(tmp_path):
     # the final weights are the second phase's, and they are not the first phase's
     assert sha256_file(tmp_path / "jpeg_hance-fast.pt") != second["recipe"]["init"]["sha256"]
     assert not torch.equal(first["model"]["head.weight"], second["model"]["head.weight"])
+
+
+def test_bad_init_is_one_line_and_status_2(tmp_path, capsys):
+    missing = tmp_path / "missing.pt"
+    assert train.main(["jpeg_hance", "--init", str(missing), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(missing) in err
+    with pytest.raises(SystemExit) as exc:  # argparse's error: usage and one line, status 2
+        train.main(["refnet", "--init", "shipped", "--out", str(tmp_path)])
+    assert exc.value.code == 2 and "--init" in capsys.readouterr().err
