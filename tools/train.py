@@ -2,10 +2,16 @@
 
 Stages, as in the seed: ``jpeg_hance`` (MSE on JPEG crops), ``depth_net`` (unsupervised
 loss, JPEG-Hance frozen in front of it), ``refnet`` (SaS focal-stack labels). ``all`` runs
-the three in order (Depth-Net uses the JPEG-Hance just trained).
+the three in order (Depth-Net uses the JPEG-Hance just trained). The fast presets of
+JPEG-Hance and Depth-Net train on the real samples instead (``../shared/data``): JPEG-Hance
+fast in two phases, MSE on crops of every view, then the light field the decoder warps from
+the restored centre view (:func:`hance_lf_loss`; ``--objective image`` stops after the
+first, ``--init shipped|FILE`` runs only the second from those weights), Depth-Net fast as
+the hint refiner (:func:`refiner_batch_loss`).
 
     python tools/train.py all --preset fast --device cuda --out runs/fast --ship
     python tools/train.py depth_net --steps 4000 --resume --out runs/fast
+    python tools/train.py jpeg_hance --init shipped --out runs/lf --ship
 
 Every run is seeded; checkpoints (model, optimiser, step) are written every
 ``--checkpoint-every`` steps to ``OUT/NAME-PRESET.ckpt`` and ``--resume`` continues from
