@@ -24,6 +24,9 @@ Payload (version 2, little-endian)::
     version u8 = 2 | kind u8 (0 full, 1 delta, 2 repeat) | scale u8 | coder u8
     lo f32 | hi f32 | hs u16 | ws u16 | ref u32 | body
 
+Version 4 (5 with the axes below) is the same layout with coder 1 (a full map, context
+coded); versions 2 and 3 carry coder 0 (zstd; the byte was reserved before).
+
 Version 3 is version 2 followed by the view axes, ``A`` as 4 f32 (row-major), before the
 body; it is written only when ``A`` is not the identity, so a stream that follows the
 convention is byte for byte what it was.
@@ -65,6 +68,10 @@ _HEADER_V2 = struct.Struct("<BBBBffHHI")
 _AXES = struct.Struct("<4f")
 HINT_VERSION = 2
 HINT_VERSION_AXES = 3
+# versions 2 and 3 whose fourth header byte names the body's coder (:data:`CODER_CONTEXT`):
+# readers from before the context coder refuse them by version instead of as corrupt zstd
+HINT_VERSION_CODED = 4
+HINT_VERSION_CODED_AXES = 5
 GEOMETRY_MODES = ("auto", "standard")
 #: Largest entry of a view-axes matrix a payload may carry (|A| <= 8: a view step moving a
 #: point eight times its disparity is not a light field this codec models).
@@ -589,9 +596,12 @@ def quantise(hm: HintMap, search: tuple[float, float] | None = None, precision: 
 
 def _pack(kind: int, qh: QuantisedHint, ref: int, body: bytes, coder: int = CODER_ZSTD) -> bytes:
     hs, ws = qh.q.shape
-    if qh.axes is None:  # the convention: version 2, as before view axes existed
-        return _HEADER_V2.pack(HINT_VERSION, kind, qh.scale, coder, qh.lo, qh.hi, hs, ws, ref) + body
-    return (_HEADER_V2.pack(HINT_VERSION_AXES, kind, qh.scale, coder, qh.lo, qh.hi, hs, ws, ref)
+    coded = coder != CODER_ZSTD
+    if qh.axes is None:  # the convention: version 2 (4 with a coder), as before view axes existed
+        version = HINT_VERSION_CODED if coded else HINT_VERSION
+        return _HEADER_V2.pack(version, kind, qh.scale, coder, qh.lo, qh.hi, hs, ws, ref) + body
+    version = HINT_VERSION_CODED_AXES if coded else HINT_VERSION_AXES
+    return (_HEADER_V2.pack(version, kind, qh.scale, coder, qh.lo, qh.hi, hs, ws, ref)
             + _AXES.pack(*np.asarray(qh.axes, np.float32).ravel().tolist()) + body)
 
 
@@ -807,17 +817,20 @@ def _parse(data: bytes, size: tuple[int, int], frame: int | None, refs: dict[int
             raise BitstreamError("depth hint: truncated", frame)
         _, lo, hi, hs, ws = _HEADER_V1.unpack_from(data)
         kind, scale, ref, body, coder = KIND_FULL, None, 0, data[_HEADER_V1.size:], CODER_ZSTD
-    elif version in (HINT_VERSION, HINT_VERSION_AXES):
-        head = _HEADER_V2.size + (_AXES.size if version == HINT_VERSION_AXES else 0)
+    elif version in (HINT_VERSION, HINT_VERSION_AXES, HINT_VERSION_CODED, HINT_VERSION_CODED_AXES):
+        with_axes = version in (HINT_VERSION_AXES, HINT_VERSION_CODED_AXES)
+        head = _HEADER_V2.size + (_AXES.size if with_axes else 0)
         if len(data) < head:
             raise BitstreamError("depth hint: truncated", frame)
         _, kind, scale, coder, lo, hi, hs, ws, ref = _HEADER_V2.unpack_from(data)
         body = data[head:]
         if kind not in (KIND_FULL, KIND_DELTA, KIND_REPEAT) or scale < 1:
             raise BitstreamError(f"depth hint: unknown kind {kind} or scale {scale}", frame)
-        if coder not in (CODER_ZSTD, CODER_CONTEXT) or (coder == CODER_CONTEXT and kind != KIND_FULL):
+        if version in (HINT_VERSION, HINT_VERSION_AXES):
+            coder = CODER_ZSTD  # the byte was reserved (written as 0) before coders existed
+        elif coder != CODER_CONTEXT or kind != KIND_FULL:
             raise BitstreamError(f"depth hint: unknown coder {coder} for a kind {kind} map", frame)
-        if version == HINT_VERSION_AXES:
+        if with_axes:
             axes = np.asarray(_AXES.unpack_from(data, _HEADER_V2.size), np.float32).reshape(2, 2)
             if not (np.all(np.isfinite(axes)) and np.abs(axes).max() <= MAX_AXIS_ENTRY):
                 raise BitstreamError(f"depth hint: bad view axes {axes.ravel().tolist()}", frame)

@@ -258,7 +258,7 @@ def test_a_light_field_that_follows_the_convention_keeps_the_identity(square_sce
     axes = H.estimate_view_axes(square_scene)
     assert H.is_standard(axes)
     payload = H.encode_hint(H.estimate_hint_map(square_scene))
-    assert payload[0] == H.HINT_VERSION  # the version-2 payload, byte for byte as before
+    assert payload[0] == H.HINT_VERSION_CODED  # the layout of version 2: no view axes
 
 
 def test_flipped_view_rows_are_detected_sent_and_warped(square_scene):
@@ -271,7 +271,7 @@ def test_flipped_view_rows_are_detected_sent_and_warped(square_scene):
     assert np.abs(axes - np.diag([-1.0, 1.0])).max() < 0.06
     hm = H.estimate_hint_map(flipped)
     payload = H.encode_hint(hm)
-    assert payload[0] == H.HINT_VERSION_AXES
+    assert payload[0] == H.HINT_VERSION_CODED_AXES
     qh = H.HintDecoder().parse(payload, (256, 256), frame=0)
     assert np.array_equal(qh.axes, hm.axes)
     # decoded quality: measured 28.06 dB with the axes, 23.90 without, 28.18 unflipped
@@ -288,7 +288,8 @@ def test_a_video_keeps_its_view_axes_in_delta_and_repeat_hints():
     payloads = [tracker.encode(f, k) for k, f in enumerate(frames)]
     dec = H.HintDecoder()
     got = [dec.decode_with_axes(p, (128, 192), frame=k)[1] for k, p in enumerate(payloads)]
-    assert all(p[0] == H.HINT_VERSION_AXES for p in payloads)
+    assert payloads[0][0] == H.HINT_VERSION_CODED_AXES  # a key map, context coded
+    assert all(p[0] in (H.HINT_VERSION_AXES, H.HINT_VERSION_CODED_AXES) for p in payloads)
     assert payloads[1][1] in (H.KIND_DELTA, H.KIND_REPEAT)
     assert all(np.array_equal(a, got[0]) for a in got) and got[0][0, 0] < 0
 
@@ -328,7 +329,7 @@ def test_damaged_version_3_payloads_decode_finite_or_fail_clearly():
     hm = H.HintMap(np.linspace(-2, 3, 64, dtype=np.float32).reshape(8, 8), 4, (-2.0, 3.0),
                    np.float32([[-1.07, -0.06], [-0.05, 1]]))
     payload = H.encode_hint(hm)
-    assert payload[0] == H.HINT_VERSION_AXES
+    assert payload[0] == H.HINT_VERSION_CODED_AXES
     rng = np.random.default_rng(11)
     for _ in range(300):
         bad = bytearray(payload)
@@ -347,7 +348,7 @@ def test_a_payload_declaring_a_huge_size_is_refused_before_allocating():
     # says: a hint for an 8x8 map whose body declares 1 MiB must fail without decoding it
     hm = H.HintMap(np.zeros((8, 8), np.float32), 4, (0.0, 1.0))
     head = bytearray(H.encode_hint(hm)[:H._HEADER_V2.size])
-    head[3] = H.CODER_ZSTD  # a zstd body (what streams before the context coder carry)
+    head[0], head[3] = H.HINT_VERSION, H.CODER_ZSTD  # a zstd body (streams before the context coder)
     head = bytes(head)
     body = zstandard.ZstdCompressor(level=9).compress(bytes(1 << 20))
     with pytest.raises(BitstreamError, match="declares 1048576 bytes"):
@@ -393,7 +394,7 @@ def test_context_coded_maps_round_trip_exactly_at_every_level_step(rng, k):
             q = np.where(rng.random(q.shape) < 0.05, 255, q)  # the quantiser's top value
         qh = H.QuantisedHint(q.astype(np.uint8), -1.0, 2.0, 4, None)
         payload = H._full_payload(qh)
-        assert payload[3] == H.CODER_CONTEXT
+        assert payload[3] == H.CODER_CONTEXT and payload[0] == H.HINT_VERSION_CODED
         back = H._parse(payload, (4 * q.shape[0], 4 * q.shape[1]), 0, {})
         assert np.array_equal(back.q, qh.q) and (back.lo, back.hi, back.scale) == (-1.0, 2.0, 4)
         if i == 0:  # consecutive levels: the step sent is k itself (fewer levels to code)
@@ -438,8 +439,12 @@ def test_corrupt_or_truncated_context_coded_maps_are_bitstream_errors(rng):
         assert back.q.shape == q.shape
     assert refused == len(payload) - head
     # a coder the decoder does not know, or the context coder on a delta, is refused
-    for coder, kind in ((2, H.KIND_FULL), (H.CODER_CONTEXT, H.KIND_DELTA)):
+    for coder, kind in ((2, H.KIND_FULL), (H.CODER_ZSTD, H.KIND_FULL), (H.CODER_CONTEXT, H.KIND_DELTA)):
         bad = bytearray(payload)
         bad[1], bad[3] = kind, coder
         with pytest.raises(BitstreamError, match="unknown coder"):
             H._parse(bytes(bad), (124, 164), 7, {})
+    # versions 2 and 3 are zstd whatever their reserved byte says (it was always 0)
+    old = bytearray(_zstd_payload(H.QuantisedHint(q, 0.0, 1.0, 4, None)))
+    assert old[0] == H.HINT_VERSION and old[3] == H.CODER_ZSTD
+    assert np.array_equal(H._parse(bytes(old), (124, 164), 7, {}).q, q)
