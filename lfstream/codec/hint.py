@@ -108,7 +108,7 @@ class HintOptions:
             outliers (textureless and occluded pixels) cost bits and help no view.
         precision: quantisation step, as the displacement it makes at the outermost view, in
             pixels (0: the 8-bit grid's finest step). The payload's format is the same; the
-            encoder only uses every k-th level, which zstd codes in fewer bytes. Measured
+            encoder only uses every k-th level, which codes in fewer bytes. Measured
             (with ``median=3``, q50, one frame, against the 8-bit map without the median):
             9-25 % off the stream's bytes on the shared samples and the synthetic clip
             (most of it hint bytes) at MPSNR within 0.05 dB and MSSIM within 0.0005.
