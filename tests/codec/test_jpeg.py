@@ -237,3 +237,20 @@ def test_the_choice_is_measured_on_key_frames_only(monkeypatch):
     chooser = jpeg.PostFilterChooser(interval=3)
     named = [jpeg.named_post_filter(chooser.mark(img, data)).index for _ in range(7)]
     assert len(calls) == 3 and named == [1, 1, 1, 2, 2, 2, 0]
+
+
+def test_the_jfif_segment_is_left_out_and_no_pixel_changes(rng):
+    """encode_jpeg drops libjpeg's optional JFIF APP0 segment (18 bytes): the same pixels as
+    the JPEG OpenCV writes with it, and the post-filter's comment still goes right after SOI."""
+    from lfstream.codec.jpeg import POST_FILTERS, PostFilterChoice, named_post_filter, with_post_filter
+
+    img = (rng.random((48, 72, 3)) * 255).astype(np.uint8)
+    ours = encode_jpeg(img, 50)
+    ok, full = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR),
+                            [int(cv2.IMWRITE_JPEG_QUALITY), 50, int(cv2.IMWRITE_JPEG_OPTIMIZE), 1])
+    full = full.tobytes()
+    assert full[2:4] == b"\xff\xe0" and ours[2:4] != b"\xff\xe0" and len(ours) == len(full) - 18
+    assert np.array_equal(decode_jpeg(ours, (48, 72)), decode_jpeg(full, (48, 72)))
+    marked = with_post_filter(ours, PostFilterChoice(len(POST_FILTERS) - 1, 3))
+    assert named_post_filter(marked) == PostFilterChoice(len(POST_FILTERS) - 1, 3)
+    assert np.array_equal(decode_jpeg(marked, (48, 72)), decode_jpeg(ours, (48, 72)))
