@@ -245,3 +245,18 @@ def decode_levels(body, n_levels, levels):  # pragma: no cover - compiled
             levels[y, x] = value
     # a whole body is read exactly: every byte the encoder flushed, nothing after it
     return OK if at <= body.shape[0] else OVERRUN
+
+
+def code_levels(levels: np.ndarray) -> bytes:
+    """``levels`` (2-D, values 0..255) coded by :func:`encode_levels`, without the coder's
+    first byte (always 0)."""
+    levels = np.ascontiguousarray(levels, np.int32)
+    out = np.empty(max_coded_size(levels.size), np.uint8)
+    return out[1:encode_levels(levels, out)].tobytes()
+
+
+def decode_coded_levels(body: bytes, shape: tuple[int, int], n_levels: int) -> tuple[np.ndarray, int]:
+    """Inverse of :func:`code_levels`: the ``shape`` int32 levels, below ``n_levels``, and
+    the decoder's status (:data:`OK`, else the map is not to be used)."""
+    levels = np.empty(shape, np.int32)
+    return levels, int(decode_levels(np.frombuffer(body, np.uint8), n_levels, levels))

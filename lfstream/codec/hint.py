@@ -636,25 +636,21 @@ def _level_count(k: int) -> int:
 def _coded_body(q: np.ndarray) -> bytes:
     """A full map's body for :data:`CODER_CONTEXT`: its level step, then its levels
     (:func:`lfstream.codec._entropy.encode_levels`; the coder's first byte, always 0, left out)."""
-    from lfstream.codec._entropy import encode_levels, max_coded_size
+    from lfstream.codec._entropy import code_levels
 
     k = _level_step_of(q)
-    levels = np.where(q == 255, _level_count(k) - 1, q.astype(np.int32) // k).astype(np.int32)
-    out = np.empty(max_coded_size(levels.size), np.uint8)
-    n = encode_levels(levels, out)
-    return bytes([k]) + out[1:n].tobytes()
+    return bytes([k]) + code_levels(np.where(q == 255, _level_count(k) - 1, q.astype(np.int32) // k))
 
 
 def _decoded_body(body: bytes, shape: tuple[int, int], frame: int | None) -> np.ndarray:
     """Inverse of :func:`_coded_body`: the ``(hs, ws)`` uint8 map."""
-    from lfstream.codec._entropy import OK, OVERRUN, decode_levels
+    from lfstream.codec._entropy import OK, OVERRUN, decode_coded_levels
 
     if len(body) < 1 or body[0] == 0:
         raise BitstreamError("depth hint: coded map without a level step", frame)
     k = body[0]
     count = _level_count(k)
-    levels = np.empty(shape, np.int32)
-    status = decode_levels(np.frombuffer(body, np.uint8)[1:], count, levels)
+    levels, status = decode_coded_levels(body[1:], shape, count)
     if status != OK:
         why = "truncated" if status == OVERRUN else "corrupt"
         raise BitstreamError(f"depth hint: {why} coded map", frame)

@@ -10,6 +10,7 @@ from lfstream.codec.decoder import Decoder
 from lfstream.codec.encoder import Encoder
 from lfstream.codec.shading import (
     VERSION,
+    VERSION_CODED,
     VERSION_DELTA,
     GainDecoder,
     GainReferenceError,
@@ -35,12 +36,13 @@ def shaded_gains():
     return [measure_gains(f) for f in clip]
 
 
-def test_key_maps_are_version_1_byte_for_byte_and_deltas_are_smaller(shaded_gains):
+def test_key_maps_are_the_single_frame_payload_and_deltas_are_smaller(shaded_gains):
     tracker = GainTracker(key_interval=4)
     payloads = [tracker.encode(g, k) for k, g in enumerate(shaded_gains)]
     assert payloads[0] == encode_gains(shaded_gains[0])  # the first frame: the single-frame payload
     assert payloads[4] == encode_gains(shaded_gains[4])  # a key map every 4 frames
-    assert [p[0] for p in payloads] == [VERSION, VERSION_DELTA, VERSION_DELTA, VERSION_DELTA, VERSION, VERSION_DELTA]
+    assert [p[0] for p in payloads] == [VERSION_CODED, VERSION_DELTA, VERSION_DELTA, VERSION_DELTA, VERSION_CODED,
+                                        VERSION_DELTA]
     assert max(len(p) for k, p in enumerate(payloads) if k % 4) < 0.6 * min(len(payloads[0]), len(payloads[4]))
 
 
@@ -60,10 +62,10 @@ def test_decoded_deltas_stay_within_the_dead_band(shaded_gains):
 
 def test_gaps_and_vanishing_shading_send_key_maps(shaded_gains):
     tracker = GainTracker()
-    assert tracker.encode(shaded_gains[0], 0)[0] == VERSION
-    assert tracker.encode(shaded_gains[1], 2)[0] == VERSION  # frame 1 was never encoded
+    assert tracker.encode(shaded_gains[0], 0)[0] == VERSION_CODED
+    assert tracker.encode(shaded_gains[1], 2)[0] == VERSION_CODED  # frame 1 was never encoded
     assert tracker.encode(None, 3) == b""  # no shading: nothing sent
-    assert tracker.encode(shaded_gains[2], 4)[0] == VERSION
+    assert tracker.encode(shaded_gains[2], 4)[0] == VERSION_CODED
     with pytest.raises(LFValueError, match="key_interval"):
         GainTracker(key_interval=0)
 
@@ -96,7 +98,7 @@ def test_truncated_delta_payloads_are_bitstream_errors(shaded_gains, cut):
 def test_a_video_sends_deltas_and_a_lost_one_falls_back():
     clip = synth_clip(4, 5, (64, 96), seed=9, vignetting=0.6, motion=1.0, camera_pan=0.3).lf
     header, packets = split_stream(lfstream.encode(clip, quality=80, preset="fast"))
-    assert [p.gain[0] for p in packets] == [VERSION] + [VERSION_DELTA] * 3
+    assert [p.gain[0] for p in packets] == [VERSION_CODED] + [VERSION_DELTA] * 3
     dec = Decoder(header)
     full = [dec.decode_packet(p).lf for p in packets]
     assert dec.gain_fallbacks == 0
@@ -157,3 +159,37 @@ def test_parallax_compensated_cells_measure_shading_not_content(seed):
     np.testing.assert_array_equal(compensated[2, 2], 0.0)
     # a zero disparity samples what the plain measurement samples
     np.testing.assert_array_equal(measure_gains(lf, 4, disparity=np.zeros((30, 40), np.float32)), measure_gains(lf, 4))
+
+
+def test_coded_key_maps_are_exact_smaller_than_zstd_and_version_1_still_decodes(shaded_gains):
+    """A key map (version 3, context coded) decodes to exactly the quantised gains; the
+    zstd payload it replaced (version 1) is larger and still decodes to the same."""
+    import zstandard
+
+    from lfstream.codec.shading import _HEADER, dequantise_gains, quantise_gains
+
+    for g in shaded_gains[:3]:
+        q = quantise_gains(g)
+        u, v, gh, gw, ch = q.shape
+        old = _HEADER.pack(VERSION, gh, gw, ch, u, v) + zstandard.ZstdCompressor(level=19).compress(q.tobytes())
+        new = encode_gains(g)
+        assert new[0] == VERSION_CODED and len(new) < len(old), (len(new), len(old))
+        for payload in (new, old):
+            np.testing.assert_array_equal(GainDecoder().decode(payload, VIEWS), dequantise_gains(q))
+
+
+def test_damaged_coded_key_maps_fail_clearly(shaded_gains):
+    payload = encode_gains(shaded_gains[0])
+    rng = np.random.default_rng(5)
+    for cut in range(6, len(payload)):  # every truncation of the body
+        with pytest.raises(BitstreamError, match="frame 3: gain maps"):
+            GainDecoder().decode(payload[:cut], VIEWS, frame=3)
+    for _ in range(200):
+        bad = bytearray(payload)
+        bad[int(rng.integers(6, len(bad)))] ^= 1 << int(rng.integers(0, 8))
+        try:
+            back = GainDecoder().decode(bytes(bad), VIEWS, frame=3)
+        except BitstreamError as exc:
+            assert "frame 3" in str(exc)
+            continue
+        assert back.shape == shaded_gains[0].shape and np.isfinite(back).all()
