@@ -1,4 +1,5 @@
-"""Context-adaptive binary range coding of small 8-bit level maps (the depth hint's key maps).
+"""Context-adaptive binary range coding of small 8-bit level maps (the key maps of the depth
+hint and of the gain maps).
 
 The map is coded in raster order as the residual of the median edge detector's prediction
 (LOCO-I / JPEG-LS: ``min(a, b)``, ``max(a, b)`` or ``a + b - c`` from the left, upper and
