@@ -1,6 +1,7 @@
 """The .lfs bitstream: round trips, limits, damage handling and a fuzz run."""
 
 import io
+import json
 import struct
 import zlib
 
@@ -141,3 +142,31 @@ def test_zstd_payloads_are_bounded_by_what_they_declare():
         decompress_bounded(data, 4095)
     with pytest.raises(zstandard.ZstdError):
         decompress_bounded(b"not zstd at all", 100)
+
+
+def test_header_metadata_is_coded_with_the_dictionary_and_plain_zstd_still_reads():
+    """The header's JSON metadata goes out with the built-in zstd dictionary (a few dozen
+    bytes instead of ~200); a header written before it (meta_coding 0, plain zstd) reads the
+    same; an unknown coding is refused."""
+    import zstandard
+
+    from lfstream.codec.bitstream import _HEADER_FIXED, META_PLAIN, META_WITH_DICTIONARY, pack_header, read_header
+
+    meta = {"encoder": "lfstream-jpeg-centre", "gain_grid": 4, "quality": 37, "version": "0.1.0",
+            "hint": {"box_radius": 2, "hint_scale": 4, "max_disparity": None, "median": 3, "precision": 0.2,
+                     "step": 0.25, "work_scale": 2}}
+    header = StreamHeader(views=(7, 7), size=(375, 540), quality=37, has_hint=True, meta=meta)
+    data = pack_header(header)
+    fields = list(_HEADER_FIXED.unpack_from(data))
+    assert fields[10] == META_WITH_DICTIONARY and fields[11] < 60  # measured 21 bytes; plain zstd 168
+    assert read_header(io.BytesIO(data)).meta == meta
+    plain = zstandard.ZstdCompressor(level=10).compress(json.dumps(meta, sort_keys=True).encode())
+    assert len(plain) > 2 * fields[11]
+    fields[10], fields[11] = META_PLAIN, len(plain)
+    body = _HEADER_FIXED.pack(*fields) + plain
+    old = body + struct.pack("<I", zlib.crc32(body))
+    assert read_header(io.BytesIO(old)).meta == meta
+    fields[10] = 7
+    body = _HEADER_FIXED.pack(*fields) + plain
+    with pytest.raises(BitstreamError, match="unknown metadata coding 7"):
+        read_header(io.BytesIO(body + struct.pack("<I", zlib.crc32(body))))
