@@ -35,7 +35,11 @@ _N_PROBS = 2 + UNARY
 #: the escape's Exp-Golomb prefix never needs more ones than this (levels < 256)
 _MAX_ESCAPE_BITS = 9
 #: decode status codes
-OK, BAD_LEVEL, OVERRUN, BAD_ESCAPE = 0, 1, 2, 3
+OK, BAD_LEVEL, OVERRUN, BAD_ESCAPE, TOO_MANY = 0, 1, 2, 3, 4
+#: No value costs less than the zero flag at its most probable (p = 2017/2048: 0.022 bits),
+#: so a body of n bytes holds at most ~364 n values: a payload declaring more is damaged or
+#: hostile, refused before anything is allocated for it
+MAX_VALUES_PER_BYTE = 400
 
 
 def max_coded_size(n_values: int) -> int:
@@ -258,6 +262,9 @@ def code_levels(levels: np.ndarray) -> bytes:
 
 def decode_coded_levels(body: bytes, shape: tuple[int, int], n_levels: int) -> tuple[np.ndarray, int]:
     """Inverse of :func:`code_levels`: the ``shape`` int32 levels, below ``n_levels``, and
-    the decoder's status (:data:`OK`, else the map is not to be used)."""
+    the decoder's status (:data:`OK`, else the map is not to be used; :data:`TOO_MANY`: more
+    values than the body can hold, nothing allocated)."""
+    if shape[0] * shape[1] > MAX_VALUES_PER_BYTE * (len(body) + 1) + 1024:
+        return np.zeros((0, 0), np.int32), TOO_MANY
     levels = np.empty(shape, np.int32)
     return levels, int(decode_levels(np.frombuffer(body, np.uint8), n_levels, levels))

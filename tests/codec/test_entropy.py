@@ -55,3 +55,18 @@ def test_damage_is_reported_not_crashed(rng):
         back, status = decode_coded_levels(bytes(bad), levels.shape, 100)
         if status == OK:
             assert back.min() >= 0 and back.max() < 100
+
+
+def test_a_body_too_small_for_its_declared_size_is_refused_before_allocating():
+    """The cheapest value costs 0.022 bits: a constant map is the limit (measured 24 bytes for
+    6144 values), and a payload declaring far more values than its bytes can hold is refused
+    without allocating them (a hostile 8192 x 8192 hint in a few bytes)."""
+    from lfstream.codec._entropy import MAX_VALUES_PER_BYTE, TOO_MANY
+
+    flat = np.zeros((512, 512), np.int32)
+    body = code_levels(flat)
+    assert flat.size <= MAX_VALUES_PER_BYTE * (len(body) + 1)  # the densest real map still decodes
+    back, status = decode_coded_levels(body, flat.shape, 1)
+    assert status == OK and np.array_equal(back, flat)
+    back, status = decode_coded_levels(body[:8], (8192, 8192), 1)
+    assert status == TOO_MANY and back.size == 0
