@@ -667,10 +667,9 @@ def _initial_weights(name: str, preset: str, init: str, device: str) -> tuple[to
     from lfstream.models.manifest import manifest_entry, sha256_file
 
     if init == "shipped":
+        model = load_model(name, preset, device)  # a WeightsError where none ship
         entry = manifest_entry(name, preset)
-        if entry is None:
-            raise SystemExit(f"--init shipped: no weights ship for {name}/{preset}")
-        return load_model(name, preset, device), {"sha256": entry["sha256"], "recipe": entry["recipe"]}
+        return model, {"sha256": entry["sha256"], "recipe": entry["recipe"]}
     path = Path(init)
     return load_model(name, preset, device, path=path), {"sha256": sha256_file(path), "recipe": None}
 

@@ -168,6 +168,30 @@ def _next_byte(body, at):  # pragma: no cover - compiled
 
 
 @numba.njit(**_JIT)
+def _normalise(rng, code, body, at):  # pragma: no cover - compiled
+    """The decoder's counterpart of the encoder's byte shifts (past the body's end: zeros,
+    counted in ``at``)."""
+    while rng < _TOP:
+        byte, at = _next_byte(body, at)
+        rng = (rng << 8) & _MASK32
+        code = ((code << 8) | byte) & _MASK32
+    return rng, code, at
+
+
+@numba.njit(**_JIT)
+def _decode_direct(rng, code, body, at):  # pragma: no cover - compiled
+    """One bit of :func:`_encode_direct` (probability one half)."""
+    rng >>= 1
+    if code >= rng:
+        code -= rng
+        bit = 1
+    else:
+        bit = 0
+    rng, code, at = _normalise(rng, code, body, at)
+    return bit, rng, code, at
+
+
+@numba.njit(**_JIT)
 def decode_levels(body, n_levels, levels):  # pragma: no cover - compiled
     """Inverse of :func:`encode_levels` (``body``: its bytes after the first, which is
     always 0); fills ``levels`` ((h, w) int32) and returns a status: ``OK``, ``BAD_LEVEL``
@@ -200,17 +224,9 @@ def decode_levels(body, n_levels, levels):  # pragma: no cover - compiled
                         rng -= bound
                         probs[ctx, k] = p - (p >> _MOVE)
                         bit = 1
+                    rng, code, at = _normalise(rng, code, body, at)
                 else:
-                    rng >>= 1
-                    if code >= rng:
-                        code -= rng
-                        bit = 1
-                    else:
-                        bit = 0
-                while rng < _TOP:
-                    byte, at = _next_byte(body, at)
-                    rng = (rng << 8) & _MASK32
-                    code = ((code << 8) | byte) & _MASK32
+                    bit, rng, code, at = _decode_direct(rng, code, body, at)
                 if k == 0:
                     if bit == 0:
                         break
@@ -231,16 +247,8 @@ def decode_levels(body, n_levels, levels):  # pragma: no cover - compiled
                         continue
                     e = 1
                     for _ in range(n_bits):
-                        rng >>= 1
-                        if code >= rng:
-                            code -= rng
-                            e = (e << 1) | 1
-                        else:
-                            e <<= 1
-                        while rng < _TOP:
-                            byte, at = _next_byte(body, at)
-                            rng = (rng << 8) & _MASK32
-                            code = ((code << 8) | byte) & _MASK32
+                        bit, rng, code, at = _decode_direct(rng, code, body, at)
+                        e = (e << 1) | bit
                     extra = e - 1
                     r += extra if r > 0 else -extra
                     break

@@ -192,7 +192,8 @@ def decompress_bounded(data: bytes, limit: int, dictionary: zstandard.ZstdCompre
     size = zstandard.get_frame_parameters(data).content_size
     if size not in (zstandard.CONTENTSIZE_UNKNOWN, zstandard.CONTENTSIZE_ERROR) and size > limit:
         raise zstandard.ZstdError(f"the frame declares {size} bytes, more than the {limit} expected")
-    decompressor = zstandard.ZstdDecompressor(dict_data=dictionary) if dictionary else zstandard.ZstdDecompressor()
+    decompressor = zstandard.ZstdDecompressor(dict_data=dictionary) if dictionary is not None \
+        else zstandard.ZstdDecompressor()
     return decompressor.decompress(data, max_output_size=limit)
 
 

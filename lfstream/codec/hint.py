@@ -623,8 +623,8 @@ def _level_step_of(q: np.ndarray) -> int:
     ``k`` and 255): the largest that describes every value, 1 where none does better."""
     v = q.astype(np.int64)
     inner = v[v != 255]
-    k = int(np.gcd.reduce(inner)) if inner.size else 0
-    k = min(k, 255) if k > 0 else 255  # 0 and 255 alone: two levels
+    # values below 255 have a gcd below 255; none but 0 (gcd 0): the two levels 0 and 255
+    k = (int(np.gcd.reduce(inner)) if inner.size else 0) or 255
     return k if np.all((v % k == 0) | (v == 255)) else 1
 
 

@@ -16,12 +16,12 @@ u8 V`` + the int8 values ``round(64 * log2(gain))``, shape ``(U, V, grid_h, grid
 channels)``, plus 127 as one level image (rows ``(u, grid_y)``, columns ``(v, grid_x,
 channel)``) range coded with context-adaptive probabilities (:mod:`lfstream.codec._entropy`;
 19-27 % fewer bytes than zstd on the synthetic scenes); version 1 (before it) the same
-header + zstd of the values, still decoded. In a video (:class:`GainTracker`), the frames between key maps (every
-``key_interval`` frames) send a delta (version 2): the same header plus ``u32 reference``,
-the frame whose map it changes, + zstd(uint8 ``(q - q_reference) mod 256``). Shading is a
-property of the camera, but the measured cells also move with the content (on the built-in
-clip 40 % of the values change by a step from frame to frame, 3-8 % by more), so the
-encoder keeps a cell's sent value until the measurement leaves it by more than
+header + zstd of the values, still decoded. In a video (:class:`GainTracker`), the frames
+between key maps (every ``key_interval`` frames) send a delta (version 2): the same header
+plus ``u32 reference``, the frame whose map it changes, + zstd(uint8 ``(q - q_reference)
+mod 256``). Shading is a property of the camera, but the measured cells also move with the
+content (on the built-in clip 40 % of the values change by a step from frame to frame, 3-8 %
+by more), so the encoder keeps a cell's sent value until the measurement leaves it by more than
 :data:`GAIN_DEADBAND` steps: deltas of ~0.35 KB instead of ~1.85 KB maps a frame.
 """
 
