@@ -292,7 +292,7 @@ def _row_sample3_gain(packed, stride, idx, fxs, fys, top, bottom, wa, vals, dst)
 
 
 @numba.njit(**_PARALLEL)
-def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, occlusion, gains, g_rows, g_row_w,
+def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, splat, gains, g_rows, g_row_w,
                    g_cols, g_col_w, chunks, out):  # pragma: no cover - compiled
     """Every view of a light field from its centre view and disparity, in one parallel pass.
 
@@ -300,7 +300,7 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, occlus
     offsets[u, v]`` (:func:`lfstream.lightfield.view_offsets`; bilinear,
     1/1024-pixel fixed point, border replicated), where ``d`` is the centre
     map forward-splatted into the view with a z-test, holes given the background side's
-    disparity (``occlusion``; :func:`_fill_holes`), or the centre map at the view pixel; the sample is multiplied by the
+    disparity (where ``splat[u, v]``; :func:`_fill_holes`), or the centre map at the view pixel; the sample is multiplied by the
     view's gain map, bilinearly up-sampled (OpenCV's INTER_LINEAR resize), and rounded.
 
     Args:
@@ -311,6 +311,7 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, occlus
         view_disp: (U, V, H, W) float32 per-view disparities (Depth-Net's maps), used in
             place of splatting ``disp``; shape (0, 0, 1, 1): none.
         offsets: (U, V, 2) float32 displacement of each view per unit disparity.
+        splat: (U, V) bool, the views whose disparity is splatted (never the centre view).
         gains: (U, V, gh, gw, Cg) float32 gain maps (Cg = 1 or C), or shape (0, 0, 1, 1, 1): none.
         g_rows, g_row_w: (H, 2) int64 grid rows per image row and the weight of the first.
         g_cols, g_col_w: (W, 2) and (W,) the same per column.
@@ -337,12 +338,12 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, occlus
         gcols = np.ones((gh, w * n_ch), np.float32)
         vals = np.empty(w * n_ch, np.int32)
         for k in range(task, n_views, chunks):
-            _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, k // n_v, k % n_v, occlusion, gains,
+            _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, k // n_v, k % n_v, splat, gains,
                        g_rows, g_row_w, g_cols, g_col_w, dview, cols, targets, holes, idx, fxs, fys, gcols, vals, out)
 
 
 @numba.njit(**_ROW)
-def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, occlusion, gains, g_rows, g_row_w,
+def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, splat, gains, g_rows, g_row_w,
                g_cols, g_col_w, dview, cols, targets, holes, idx, fxs, fys, gcols, vals, out):  # pragma: no cover
     """One view of :func:`warp_all_views`, in the caller's scratch buffers."""
     h, w = disp.shape
@@ -352,7 +353,7 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, occl
     du = offsets[u, v, 0]
     dv = offsets[u, v, 1]
     stride = np.uint32(w + 2)  # a row of the padded centre view
-    splatted = occlusion and not (du == 0 and dv == 0) and not per_view
+    splatted = splat[u, v] and not (du == 0 and dv == 0) and not per_view
     if splatted:
         _splat_view(disp, cols, du, dv, dview, targets)
     # the gain map up-sampled along x once per view (gh rows); each image row then
@@ -387,14 +388,15 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, occl
 
 
 @numba.njit(**_PARALLEL)
-def splat_all_views(disp, offsets, occlusion, out):  # pragma: no cover - compiled
+def splat_all_views(disp, offsets, splat, out):  # pragma: no cover - compiled
     """The per-view disparities :func:`warp_all_views` samples with: ``disp`` forward-splatted
-    into each view and its holes filled (``occlusion``), or ``disp`` itself; warping with
-    these as ``view_disp`` gives the same views, bit for bit.
+    into each view and its holes filled (where ``splat[u, v]``), or ``disp`` itself; warping
+    with these as ``view_disp`` gives the same views, bit for bit.
 
     Args:
         disp: (H, W) float32 centre-view disparity.
         offsets: (U, V, 2) float32 displacement of each view per unit disparity.
+        splat: (U, V) bool, the views to splat.
         out: (U, V, H, W) float32, overwritten.
     """
     h, w = disp.shape
@@ -405,7 +407,7 @@ def splat_all_views(disp, offsets, occlusion, out):  # pragma: no cover - compil
         du = offsets[u, v, 0]
         dv = offsets[u, v, 1]
         dview = out[u, v]
-        if not occlusion or (du == 0 and dv == 0):
+        if not splat[u, v] or (du == 0 and dv == 0):
             dview[:] = disp
             continue
         cols = np.arange(w).astype(np.float32)
@@ -414,6 +416,32 @@ def splat_all_views(disp, offsets, occlusion, out):  # pragma: no cover - compil
         _splat_view(disp, cols, du, dv, dview, targets)
         for y in range(h):
             _fill_holes(disp[y], dview[y], holes)
+
+
+@numba.njit(**_ROW)
+def fold_bounds(disp):  # pragma: no cover - compiled
+    """``(max |d(y, x+1) - d(y, x)| * max(|d(y, x)|, |d(y, x+1)|), the same along y)``: how
+    far the disparity changes between neighbours, weighted by how far it moves them
+    (:func:`lfstream.codec.warp.splat_views`). One pass; float32 products, each rounded once,
+    as the batched torch path computes them.
+
+    Args:
+        disp: (H, W) float32.
+    """
+    h, w = disp.shape
+    mx = np.float32(0.0)
+    my = np.float32(0.0)
+    for y in range(h):
+        row = disp[y]
+        for x in range(w - 1):
+            a, b = row[x], row[x + 1]
+            mx = max(mx, abs(b - a) * max(abs(a), abs(b)))
+        if y + 1 < h:
+            nxt = disp[y + 1]
+            for x in range(w):
+                a, b = row[x], nxt[x]
+                my = max(my, abs(b - a) * max(abs(a), abs(b)))
+    return mx, my
 
 
 # RGB -> grey as OpenCV's 8-bit COLOR_RGB2GRAY computes it (BT.601 weights in 15-bit fixed

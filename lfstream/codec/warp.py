@@ -11,6 +11,19 @@ with a z-test (the nearer surface wins); a pixel nothing landed on (a disocclusi
 crack where a surface stretches) takes the disparity of its nearest splatted neighbour on
 the background side and is sampled at its own position, so a foreground edge neither
 smears into the background nor leaves a crack.
+
+The splat is skipped for a view where it cannot matter (:func:`splat_views`): view pixel
+``p`` samples at ``p + δ d(q)`` with ``q = p + δ d(q)`` the centre pixel that lands on it, and
+without the splat at ``p + δ d(p)``; the two differ by ``|δ| |d(q) - d(p)|``, which to first
+order is at most ``|δ| (|δ_u| M_y + |δ_v| M_x)`` with ``M_x = max |∂d/∂x| |d|`` (neighbour
+differences) and ``M_y`` the same along ``y``. Where that bound is at most
+:data:`SPLAT_TOLERANCE_PX` the view samples with the centre map: a quarter of a pixel at
+most, so no z-test can change which surface a pixel shows. Measured on the default encode of
+the shared samples and the synthetic clip at q50 (2-core EPYC, against splatting every
+view): lytro_translucent splats 12 of its 48 views, seahorse 22 of 24, dino and cotton 4 of
+8, synthetic 46 of 48, lytro_bikes all 48; MPSNR −0.0029 … +0.0003 dB, MSSIM unchanged to
+1e-5; decode −19 % on lytro_translucent, −11 % on seahorse, the others within the noise
+(15 interleaved runs each). The bound costs one pass over the map (0.3 ms at 375 x 540).
 """
 
 from __future__ import annotations
@@ -19,6 +32,38 @@ import numpy as np
 
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_finite, to_uint8, view_offsets
+
+#: The largest first-order difference (px) between a view's samples with and without the
+#: z-tested splat at which the splat is skipped (:func:`splat_views`).
+SPLAT_TOLERANCE_PX = 0.25
+
+
+def splat_views(disparity: np.ndarray, offsets: np.ndarray, tolerance: float = SPLAT_TOLERANCE_PX) -> np.ndarray:
+    """Which views the occlusion-aware warp splats: those where the centre map's own
+    samples could be more than ``tolerance`` px from the splatted map's (the module
+    docstring's first-order bound); never the centre view.
+
+    Args:
+        disparity: ``(H, W)`` float32 centre-view disparity, px per view step (finite).
+        offsets: ``(U, V, 2)`` displacement of each view per unit disparity
+            (:func:`lfstream.lightfield.view_offsets`).
+        tolerance: px; 0 splats every view but the centre.
+
+    Shape:
+        - output: ``(U, V)`` bool
+    """
+    from lfstream.codec._kernels import fold_bounds
+
+    mx, my = fold_bounds(np.ascontiguousarray(disparity, np.float32))
+    return _splat_mask(float(mx), float(my), offsets, tolerance)
+
+
+def _splat_mask(mx: float, my: float, offsets: np.ndarray, tolerance: float) -> np.ndarray:
+    """:func:`splat_views` from the fold bounds (shared with the batched torch warp)."""
+    off = np.asarray(offsets, np.float64)
+    du, dv = np.abs(off[..., 0]), np.abs(off[..., 1])
+    bound = np.hypot(du, dv) * (du * my + dv * mx)
+    return (bound > tolerance) & ((du > 0) | (dv > 0))
 
 
 def _linear_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray]:
@@ -53,7 +98,8 @@ def warp_views(
         centre: ``(H, W, C)`` uint8 or float in ``[0, 1]``.
         disparity: ``(H, W)`` centre-view disparity in pixels per view step, or a constant.
         views: ``(U, V)`` of the output.
-        occlusion: per-view disparity by z-tested forward splatting (see module docstring).
+        occlusion: per-view disparity by z-tested forward splatting where it can matter
+            (:func:`splat_views`; see the module docstring).
         gains: ``(U, V, gh, gw, 1 or C)`` per-view gain maps (:mod:`lfstream.codec.shading`),
             bilinearly up-sampled and multiplied in; ``None``: none.
         axes: ``(2, 2)`` view axes of the capture (:func:`lfstream.lightfield.view_offsets`);
@@ -78,7 +124,9 @@ def warp_views(
         from lfstream.codec.shading import apply_gains
 
         return apply_gains(flat, gains)
-    return _warp_kernel(src, np.ascontiguousarray(d), None, offsets, occlusion, gains)
+    d = np.ascontiguousarray(d)
+    splat = splat_views(d, offsets) if occlusion else np.zeros((u, v), bool)
+    return _warp_kernel(src, d, None, offsets, splat, gains)
 
 
 def warp_views_at(centre: np.ndarray, disparity: np.ndarray, views: tuple[int, int], keys: list[tuple[int, int]],
@@ -111,7 +159,7 @@ def warp_views_at(centre: np.ndarray, disparity: np.ndarray, views: tuple[int, i
     offsets = np.ascontiguousarray(view_offsets((u, v), axes)[rows, cols][None])  # a 1 x len(keys) grid
     if gains is not None:
         gains = np.ascontiguousarray(gains[rows, cols][None])
-    return _warp_kernel(src, d, None, offsets, True, gains)[0]
+    return _warp_kernel(src, d, None, offsets, splat_views(d, offsets), gains)[0]
 
 
 def _check_views(views: tuple[int, int], name: str = "views") -> tuple[int, int]:
@@ -134,9 +182,9 @@ def _check_gains(gains: np.ndarray | None, views: tuple[int, int], c: int) -> np
 
 
 def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, offsets: np.ndarray,
-                 occlusion: bool, gains: np.ndarray | None) -> np.ndarray:
+                 splat: np.ndarray, gains: np.ndarray | None) -> np.ndarray:
     """Runs the fused warp (:func:`lfstream.codec._kernels.warp_all_views`) over every
-    channel triple of ``src`` (H, W, C) uint8."""
+    channel triple of ``src`` (H, W, C) uint8; ``splat``: (U, V) bool, the views splatted."""
     import numba
 
     from lfstream.codec._kernels import _LANES, pack_lanes, warp_all_views
@@ -157,7 +205,7 @@ def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, o
     for ch0 in range(0, c, _LANES):  # three channels per pass, in the lanes of one uint64
         n_ch = min(_LANES, c - ch0)
         pack_lanes(src, ch0, n_ch, packed)
-        warp_all_views(packed, c, ch0, n_ch, d, view_disp, offsets, bool(occlusion), gains, rows, row_w, cols,
+        warp_all_views(packed, c, ch0, n_ch, d, view_disp, offsets, splat, gains, rows, row_w, cols,
                        col_w, numba.get_num_threads(), out)
     return out.reshape(u, v, h, w, c)
 
@@ -166,8 +214,9 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
                      axes: np.ndarray | None = None) -> np.ndarray:
     """The per-view disparity maps :func:`warp_views` samples each view with: the centre map
     forward-splatted into the view, holes filled from the background side (see the module
-    docstring), or the centre map itself without ``occlusion``. ``warp_views_per_view`` with
-    these maps gives exactly ``warp_views``'s light field; Depth-Net refines them.
+    docstring; only where it can matter, :func:`splat_views`), or the centre map itself
+    without ``occlusion``. ``warp_views_per_view`` with these maps gives exactly
+    ``warp_views``'s light field; Depth-Net refines them.
 
     Args:
         disparity: ``(H, W)`` centre-view disparity in pixels per view step.
@@ -186,7 +235,8 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
     from lfstream.codec._kernels import splat_all_views
 
     out = np.empty((u, v, *d.shape), np.float32)
-    splat_all_views(d, view_offsets((u, v), axes), bool(occlusion), out)
+    offsets = view_offsets((u, v), axes)
+    splat_all_views(d, offsets, splat_views(d, offsets) if occlusion else np.zeros((u, v), bool), out)
     return out
 
 
@@ -214,8 +264,9 @@ def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray, axes: np.nd
     check_finite(maps, "disparities")
     src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
     gains = _check_gains(gains, (u, v), src.shape[2])
-    return _warp_kernel(src, np.ascontiguousarray(maps[u // 2, v // 2]), maps, view_offsets((u, v), axes), False,
-                        gains)
+    return _warp_kernel(src, np.ascontiguousarray(maps[u // 2, v // 2]), maps, view_offsets((u, v), axes),
+                        np.zeros((u, v), bool), gains)
 
 
-__all__ = ["view_disparities", "warp_views", "warp_views_at", "warp_views_per_view"]
+__all__ = ["SPLAT_TOLERANCE_PX", "splat_views", "view_disparities", "warp_views", "warp_views_at",
+           "warp_views_per_view"]

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lfstream.codec.warp import _check_views, _linear_taps
+from lfstream.codec.warp import SPLAT_TOLERANCE_PX, _check_views, _linear_taps, _splat_mask
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import view_offsets
 
@@ -68,6 +68,22 @@ def _splat(d: torch.Tensor, du: torch.Tensor, dv: torch.Tensor) -> torch.Tensor:
     flat = torch.full((b * n * h * w + 1,), _HOLE, dtype=torch.float32, device=dev)
     flat.scatter_reduce_(0, target.reshape(-1), d.expand(b, n, h, w).reshape(-1), reduce="amax", include_self=True)
     return flat[:-1].view(b, n, h, w)
+
+
+def _fold_bounds(d: torch.Tensor) -> torch.Tensor:
+    """Per frame ``(M_x, M_y)`` of the centre maps ``d`` (B, 1, H, W), as
+    :func:`lfstream.codec._kernels.fold_bounds` computes them (the same float32 operations,
+    each rounded once, so the same values).
+
+    Shape:
+        - output: ``(B, 2)`` float32
+    """
+    def along(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        if a.numel() == 0:
+            return torch.zeros(d.shape[0], dtype=torch.float32, device=d.device)
+        return ((b - a).abs() * torch.maximum(a.abs(), b.abs())).flatten(1).amax(dim=1)
+
+    return torch.stack([along(d[..., :-1], d[..., 1:]), along(d[..., :-1, :], d[..., 1:, :])], dim=1)
 
 
 def _fill_holes(maps: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
@@ -141,7 +157,8 @@ def warp_views_batched(
         centres: ``(B, H, W, C)`` uint8 centre views.
         disparities: ``(B, H, W)`` float32 centre-view disparities, px per view step.
         views: ``(U, V)`` of the output.
-        occlusion: per-view disparity by z-tested forward splatting (as ``warp_views``).
+        occlusion: per-view disparity by z-tested forward splatting where it can matter
+            (as ``warp_views``: :func:`lfstream.codec.warp.splat_views`, per frame).
         gains: ``(B, U, V, gh, gw, 1 or C)`` float32 gain maps, or ``None``; a frame whose
             maps are all within 1e-6 of 1 is warped without gains, as ``warp_views`` does.
         axes: ``(2, 2)`` view axes shared by the frames; ``None``: the convention.
@@ -181,6 +198,10 @@ def warp_views_batched(
         rows, row_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(h, gains.shape[3]))
         cols, col_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(w, gains.shape[4]))
         gains = gains.reshape(b, u * v, *gains.shape[3:])
+    splat = None  # (B, U*V) bool: the views each frame splats
+    if occlusion and view_disparities is None:
+        splat = torch.from_numpy(np.stack([_splat_mask(mx, my, offsets.cpu().numpy(), SPLAT_TOLERANCE_PX).ravel()
+                                           for mx, my in _fold_bounds(d).tolist()])).to(dev)
     out = torch.empty((b, u * v, h, w, c), dtype=torch.uint8, device=dev)
     step = max(1, chunk_pixels // max(1, b * h * w))
     ys = torch.arange(h, device=dev, dtype=torch.float32).view(1, 1, h, 1)
@@ -192,8 +213,8 @@ def warp_views_batched(
         dv = offsets[k0:k1, 1].view(1, n, 1, 1)
         if view_disparities is not None:
             maps = view_disparities[:, k0:k1]
-        elif occlusion:
-            still = ((du == 0) & (dv == 0)).expand(b, n, h, w)  # the centre view is not splatted
+        elif splat is not None and bool(splat[:, k0:k1].any()):
+            still = (~splat[:, k0:k1]).view(b, n, 1, 1).expand(b, n, h, w)  # never the centre view
             maps = torch.where(still, d, _fill_holes(_splat(d, du, dv), d))
         else:
             maps = d.expand(b, n, h, w)

@@ -8,10 +8,12 @@ import pytest
 import torch
 
 import lfstream
+from lfstream.codec._kernels import fold_bounds
 from lfstream.codec.decoder import Decoder, iter_decode
-from lfstream.codec.warp import view_disparities, warp_views, warp_views_per_view
-from lfstream.codec.warp_batched import warp_views_batched
+from lfstream.codec.warp import splat_views, view_disparities, warp_views, warp_views_per_view
+from lfstream.codec.warp_batched import _fold_bounds, warp_views_batched
 from lfstream.errors import LFShapeError, LFValueError
+from lfstream.lightfield import view_offsets
 from lfstream.synth import synth_clip
 
 
@@ -38,6 +40,23 @@ def test_same_bytes_as_the_kernel(occlusion):
     centre, disp = _scene(5)
     ref = warp_views(centre, disp, (5, 3), occlusion=occlusion)
     assert (_batched([centre], [disp], (5, 3), occlusion=occlusion)[0] == ref).all()
+
+
+def test_the_same_views_skip_the_splat_as_on_the_kernel(rng):
+    """Frames whose gentle disparity lets some views skip the splat (splat_views) and one
+    that splats every view, in one batch: the same fold bounds as the kernel's, to the bit,
+    so the same views skip, and the same bytes."""
+    centre, steep = _scene(11, size=(30, 40))
+    ys, xs = np.mgrid[0:30, 0:40].astype(np.float32)
+    gentle = (0.9 * np.sin(xs / 7.0) * np.cos(ys / 5.0)).astype(np.float32)
+    for d in (gentle, steep, rng.normal(0, 1, (30, 40)).astype(np.float32)):
+        got = _fold_bounds(torch.from_numpy(d).view(1, 1, 30, 40))[0].numpy()
+        assert tuple(got) == tuple(np.float32(x) for x in fold_bounds(d))
+    mask = splat_views(gentle, view_offsets((7, 5)))
+    assert 0 < mask.sum() < 34
+    got = _batched([centre, centre], [gentle, steep], (7, 5))
+    assert (got[0] == warp_views(centre, gentle, (7, 5))).all()
+    assert (got[1] == warp_views(centre, steep, (7, 5))).all()
 
 
 def test_view_axes_and_a_ragged_grid():
