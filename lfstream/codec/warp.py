@@ -58,6 +58,11 @@ def splat_views(disparity: np.ndarray, offsets: np.ndarray, tolerance: float = S
     return _splat_mask(float(mx), float(my), offsets, tolerance)
 
 
+def _occlusion_mask(disparity: np.ndarray, offsets: np.ndarray, occlusion: bool) -> np.ndarray:
+    """The views splatted with ``occlusion`` (:func:`splat_views`), none without it."""
+    return splat_views(disparity, offsets) if occlusion else np.zeros(offsets.shape[:-1], bool)
+
+
 def _splat_mask(mx: float, my: float, offsets: np.ndarray, tolerance: float) -> np.ndarray:
     """:func:`splat_views` from the fold bounds (shared with the batched torch warp)."""
     off = np.asarray(offsets, np.float64)
@@ -125,8 +130,7 @@ def warp_views(
 
         return apply_gains(flat, gains)
     d = np.ascontiguousarray(d)
-    splat = splat_views(d, offsets) if occlusion else np.zeros((u, v), bool)
-    return _warp_kernel(src, d, None, offsets, splat, gains)
+    return _warp_kernel(src, d, None, offsets, _occlusion_mask(d, offsets, occlusion), gains)
 
 
 def warp_views_at(centre: np.ndarray, disparity: np.ndarray, views: tuple[int, int], keys: list[tuple[int, int]],
@@ -236,7 +240,7 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
 
     out = np.empty((u, v, *d.shape), np.float32)
     offsets = view_offsets((u, v), axes)
-    splat_all_views(d, offsets, splat_views(d, offsets) if occlusion else np.zeros((u, v), bool), out)
+    splat_all_views(d, offsets, _occlusion_mask(d, offsets, occlusion), out)
     return out
 
 

@@ -183,7 +183,8 @@ def warp_views_batched(
         if tuple(view_disparities.shape) != (b, u, v, h, w):
             raise LFShapeError(f"view_disparities: expected {(b, u, v, h, w)}, got {tuple(view_disparities.shape)}")
         view_disparities = view_disparities.to(dev, torch.float32).reshape(b, u * v, h, w)
-    offsets = torch.from_numpy(view_offsets((u, v), axes).reshape(-1, 2)).to(dev)
+    grid_offsets = view_offsets((u, v), axes).reshape(-1, 2)
+    offsets = torch.from_numpy(grid_offsets).to(dev)
     # the padded centre views, one int32 plane per channel, flat: a tap is one index
     padded = torch.nn.functional.pad(centres.permute(0, 3, 1, 2).float(), (1, 1, 1, 1), mode="replicate")
     src = padded.to(torch.int32).reshape(b, c, (h + 2) * (w + 2))
@@ -200,7 +201,7 @@ def warp_views_batched(
         gains = gains.reshape(b, u * v, *gains.shape[3:])
     splat = None  # (B, U*V) bool: the views each frame splats
     if occlusion and view_disparities is None:
-        splat = torch.from_numpy(np.stack([_splat_mask(mx, my, offsets.cpu().numpy(), SPLAT_TOLERANCE_PX).ravel()
+        splat = torch.from_numpy(np.stack([_splat_mask(mx, my, grid_offsets, SPLAT_TOLERANCE_PX)
                                            for mx, my in _fold_bounds(d).tolist()])).to(dev)
     out = torch.empty((b, u * v, h, w, c), dtype=torch.uint8, device=dev)
     step = max(1, chunk_pixels // max(1, b * h * w))
