@@ -223,15 +223,18 @@ class Encoder:
             packet = self.add_residual(packet, frame, self.residual)
         return packet
 
-    def _gain_payload(self, frame: np.ndarray, seq: int, present: np.ndarray | None, hinted: bool) -> bytes:
-        """Frame ``seq``'s shading gains (measured against the warp of the hint as sent),
-        coded; ``b""`` where the stream sends none."""
+    def _gain_payload(self, frame: np.ndarray, seq: int, present: np.ndarray | None, hinted: bool,
+                      measured: np.ndarray | None = None) -> bytes:
+        """Frame ``seq``'s shading gains (measured against the warp of the hint as sent, or
+        ``measured`` so where the caller has them), coded; ``b""`` where the stream sends none."""
         if not (self.gain_grid > 0 and frame.shape[0] * frame.shape[1] > 1 and not self.codes_views):
             return b""
-        sent = self._hints.last if hinted else None  # the hint as the decoder will warp with it
-        gains = measure_gains(frame, self.gain_grid, present=present,
-                              disparity=None if sent is None else sent.values(),
-                              axes=None if sent is None else sent.axes)
+        gains = measured
+        if gains is None:
+            sent = self._hints.last if hinted else None  # the hint as the decoder will warp with it
+            gains = measure_gains(frame, self.gain_grid, present=present,
+                                  disparity=None if sent is None else sent.values(),
+                                  axes=None if sent is None else sent.axes)
         self.last_gains = gains if shading_present(gains) else None
         return self._gains.encode(self.last_gains, seq)
 
@@ -240,13 +243,16 @@ class Encoder:
         (:meth:`lfstream.codec.hint.HintTracker.coarser_key_hint`), or ``None``."""
         return self._hints.coarser_key_hint() if self.depth_hint else None
 
-    def coarsen_first_hint(self, frame: np.ndarray, packet: Packet, present: np.ndarray | None = None) -> Packet:
+    def coarsen_first_hint(self, frame: np.ndarray, packet: Packet, present: np.ndarray | None = None,
+                           gains: np.ndarray | None = None) -> Packet:
         """Frame 0's ``packet`` with its key hint sent at twice the scale, from the same sweep,
         and its shading gains, where it has any, measured again against that hint (a frame
         without shading against the finer hint keeps none: 2.5 ms saved on a 7x7x375x540
-        frame); the frames after it follow at that scale (:attr:`hint_options`, which the
-        header records). The packet is then what an encoder with that ``hint_scale`` makes
-        of the frame (byte for byte on the shared samples and the synthetic clip)."""
+        frame; ``gains``: that measurement where the caller made it,
+        :func:`lfstream.codec.shading.measure_gains` against :meth:`coarser_first_hint`);
+        the frames after it follow at that scale (:attr:`hint_options`, which the header
+        records). The packet is then what an encoder with that ``hint_scale`` makes of the
+        frame (byte for byte on the shared samples and the synthetic clip)."""
         from dataclasses import replace
 
         if packet.seq != 0 or not packet.hint:
@@ -256,7 +262,7 @@ class Encoder:
         if self.last_gains is None:
             return replace(packet, hint=hint)
         self._gains = GainTracker(self.hint_options.key_interval)  # frame 0's gains again, as a key map
-        return replace(packet, hint=hint, gain=self._gain_payload(to_uint8(np.asarray(frame)), 0, present, True))
+        return replace(packet, hint=hint, gain=self._gain_payload(to_uint8(np.asarray(frame)), 0, present, True, gains))
 
     def _code_centre(self, centre: np.ndarray) -> bytes:
         """The centre view's payload, naming the post-filter where it is measured."""

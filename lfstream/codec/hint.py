@@ -482,13 +482,41 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
         # high-pass; OpenCV's area resize: numpy's mean over a reshape took 4 ms, this 0.2)
         ring_luma = np.stack([cv2.resize(g[: hs * f, : ws * f], (ws, hs), interpolation=cv2.INTER_AREA)
                               for g in grids[:n_ring]]) if f > 1 else grids[:n_ring].copy()
-    if axes is None:
-        axes = identity
-        if options.geometry == "auto":
-            axes = _detect_axes(grids, steps, _axes_views(keys, u, v, present), work)
-    axes = np.asarray(axes, np.float32)
+    detection = None
+    if axes is None and options.geometry == "auto":
+        # the detection (optical flow, a few ms) runs beside the sweeps, which assume the
+        # convention meanwhile: it is what almost every capture turns out to follow, and
+        # where the detection finds other axes the sweeps run again with them (same result
+        # as detecting first, either way)
+        from lfstream.codec.watchdog import in_background
+
+        use = _axes_views(keys, u, v, present)
+        detection = in_background(lambda: _detect_axes(grids, steps, use, work))
+    guess = identity if axes is None else np.asarray(axes, np.float32)
+    high_passed = _high_pass(grids.copy()) if detection is not None else None
+    lo, hi, work_map, grid_offsets = _sweeps(grids, high_passed, keys, (u, v), guess, work, options, search, device)
+    if detection is not None:
+        axes = np.asarray(detection.result(), np.float32)
+        if not np.array_equal(axes, guess):
+            lo, hi, work_map, grid_offsets = _sweeps(grids, high_passed, keys, (u, v), axes, work, options, search,
+                                                      device)
+    else:
+        axes = guess
+    disp = _sent_grid(work_map, (h, w), s, work, options.median)
+    coarse = _sent_grid(work_map, (h, w), 2 * s, work, options.median) if keep_coarse else None
+    return HintMap(disp, s, (float(lo), float(hi)), axes, float(np.abs(grid_offsets).max()) or 1.0, ring_luma,
+                   coarse)
+
+
+def _sweeps(grids: np.ndarray, high_passed: np.ndarray | None, keys: list[tuple[int, int]], views: tuple[int, int],
+            axes: np.ndarray, work: int, options: HintOptions, search: tuple[float, float] | None,
+            device: str | None) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """The range pass (where ``search`` is ``None`` and the options fix no range) and the
+    working-resolution sweep of :func:`estimate_hint_map` for view ``axes``: the range swept,
+    the working map and the whole grid's view offsets. ``high_passed``: ``grids`` through
+    :func:`_high_pass` where the caller has it, else ``grids`` is high-passed in place."""
     rows, cols = np.asarray(keys).T
-    grid_offsets = view_offsets((u, v), axes)
+    grid_offsets = view_offsets(views, axes)
     offsets = np.ascontiguousarray(grid_offsets[rows, cols])
     if search is None:
         if options.max_disparity is not None:
@@ -508,11 +536,8 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
     lo, hi = search
     if not hi > lo:
         lo, hi = lo - 0.5, hi + 0.5
-    work_map = _sweep(_high_pass(grids), offsets, lo, hi, work, options, device=device)
-    disp = _sent_grid(work_map, (h, w), s, work, options.median)
-    coarse = _sent_grid(work_map, (h, w), 2 * s, work, options.median) if keep_coarse else None
-    return HintMap(disp, s, (float(lo), float(hi)), axes, float(np.abs(grid_offsets).max()) or 1.0, ring_luma,
-                   coarse)
+    images = high_passed if high_passed is not None else _high_pass(grids)
+    return lo, hi, _sweep(images, offsets, lo, hi, work, options, device=device), grid_offsets
 
 
 def _sent_grid(work_map: np.ndarray, size: tuple[int, int], scale: int, work: int, median: int) -> np.ndarray:

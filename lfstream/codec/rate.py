@@ -44,6 +44,7 @@ from lfstream.codec.hint import HintOptions
 from lfstream.codec.intra import CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.residual import VIEW_MODES
+from lfstream.codec.shading import measure_gains
 from lfstream.errors import LFValueError
 from lfstream.lightfield import centre_view, to_uint8
 
@@ -252,16 +253,26 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
         # nothing to predict, views a sequence would not carry, or too few cells to tell
         return DefaultChoice(enc, first, None)
     frame8 = np.ascontiguousarray(to_uint8(np.asarray(frame)))
+    coarse = enc.coarser_first_hint() if hint_options is None else None
+    coarse_check = coarse_gains = None
+    if coarse is not None and min(frame.shape[2:4]) // coarse.scale >= PREDICTION_CHECK_MIN_CELLS:
+        # the hint at half the resolution, judged on the same luma: sent where it predicts
+        # the ring as well (HINT_COARSEN_MAX_LOSS_DB); measured beside the full hint's check
+        # (its result is used only where that one passes)
+        from lfstream.codec.watchdog import in_background
+
+        coarse_check = in_background(lambda: prediction_psnr(frame8, coarse, enc.last_gains, present,
+                                                             enc.last_ring_luma, grid_scale=enc.last_hint.scale))
+        if enc.last_gains is not None:  # the gains a coarser hint would send, measured meanwhile too
+            coarse_gains = in_background(lambda: measure_gains(frame8, enc.gain_grid, present=present,
+                                                               disparity=coarse.values(), axes=coarse.axes))
     db = prediction_psnr(frame8, enc.last_hint, enc.last_gains, present, enc.last_ring_luma)
+    db_coarse = None if coarse_check is None else coarse_check.result()
     if db >= PREDICTION_FLOOR_DB:
-        coarse = enc.coarser_first_hint() if hint_options is None else None
-        if coarse is not None and min(frame.shape[2:4]) // coarse.scale >= PREDICTION_CHECK_MIN_CELLS:
-            # the hint at half the resolution, judged on the same luma: sent where it predicts
-            # the ring as well (HINT_COARSEN_MAX_LOSS_DB)
-            db_coarse = prediction_psnr(frame8, coarse, enc.last_gains, present, enc.last_ring_luma,
-                                        grid_scale=enc.last_hint.scale)
+        if db_coarse is not None:
             if db_coarse >= db - HINT_COARSEN_MAX_LOSS_DB:
-                return DefaultChoice(enc, enc.coarsen_first_hint(frame8, first, present), db_coarse)
+                gains = None if coarse_gains is None else coarse_gains.result()
+                return DefaultChoice(enc, enc.coarsen_first_hint(frame8, first, present, gains), db_coarse)
         return DefaultChoice(enc, first, db)
     views = Encoder(quality=quality, depth_hint=views_hint, hint_options=opts, gain_grid=gain_grid, preset="balanced",
                     residual=quality, residual_mode="views", post_filter=post_filter, device=device)

@@ -281,6 +281,21 @@ def test_flipped_view_rows_are_detected_sent_and_warped(square_scene):
     assert auto > standard + 2.0 and auto > plain - 0.5
 
 
+@pytest.mark.parametrize("flip", [False, True])
+def test_sweeping_beside_the_axes_detection_gives_the_map_of_detecting_first(square_scene, flip):
+    """estimate_hint_map sweeps on the convention while the axes are detected beside it, and
+    sweeps again where they differ (the flipped rows): the map, range, axes, kept luma and
+    coarser map of detecting the axes first, bit for bit."""
+    lf = np.ascontiguousarray(square_scene[::-1]) if flip else square_scene
+    axes = H.estimate_view_axes(lf)
+    assert H.is_standard(axes) != flip
+    auto = H.estimate_hint_map(lf, keep_ring_luma=True, keep_coarse=True)
+    first = H.estimate_hint_map(lf, axes=axes, keep_ring_luma=True, keep_coarse=True)
+    assert np.array_equal(auto.axes, first.axes) and auto.search == first.search and auto.reach == first.reach
+    for a, b in ((auto.disparity, first.disparity), (auto.coarse, first.coarse), (auto.ring_luma, first.ring_luma)):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
 def test_a_video_keeps_its_view_axes_in_delta_and_repeat_hints():
     clip = synth_clip(3, 7, (128, 192), seed=3, motion=0.0, camera_pan=0.0)
     frames = np.ascontiguousarray(clip.lf[:, ::-1])

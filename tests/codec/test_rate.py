@@ -158,6 +158,29 @@ def test_the_default_is_the_fast_preset_byte_for_byte_where_the_warp_predicts():
     assert lfstream.encode(clip) == lfstream.encode(clip, preset="fast")
 
 
+def test_the_coarser_hints_gains_measured_beside_the_check_are_the_ones_it_sends():
+    """choose_default measures the gains a coarser first hint would send while it checks the
+    finer one; passed to coarsen_first_hint they give the packet it makes measuring them
+    itself, byte for byte, and the default stream is the one that sends them."""
+    from lfstream.codec.encoder import Encoder
+    from lfstream.codec.rate import choose_default
+    from lfstream.codec.shading import measure_gains
+
+    lf = synth_clip(1, 7, (192, 256), seed=3, noise=1.0, vignetting=0.3, motion=0, camera_pan=0).lf[0]
+    packets = []
+    for speculate in (False, True):
+        enc = Encoder(quality=50, depth_hint=True, preset="fast")
+        first = enc.encode_frame(lf, 0, 0)
+        coarse = enc.coarser_first_hint()
+        assert coarse is not None and enc.last_gains is not None  # vignetting: gains are sent
+        gains = measure_gains(lf, enc.gain_grid, disparity=coarse.values(), axes=coarse.axes) if speculate else None
+        packets.append(enc.coarsen_first_hint(lf, first, None, gains))
+    assert packets[0] == packets[1] and packets[0].gain
+    choice = choose_default(lf)
+    assert choice.encoder.hint_options.hint_scale == coarse.scale == 8  # the default takes the coarser hint
+    assert choice.first == packets[0]
+
+
 @pytest.mark.parametrize("size", [(96, 128), (75, 101)])  # whole hint blocks, and a ragged edge
 def test_the_check_reads_the_sweeps_luma_not_the_views_again(size):
     """The encoder keeps the centre and ring luma its sweep read (HintMap.ring_luma): the
