@@ -802,3 +802,38 @@ def add_i420_residual(lf, planes, positions, offset, store):  # pragma: no cover
         view = lf[positions[k, 0], positions[k, 1]].reshape(h, w3)
         for y in range(y0, min(y0 + _I420_ROWS, h)):
             _i420_residual_row(view[y], flat, y, ph, pw, np.int32(offset), store, vcb, vcr, hcb, hcr, rgb)
+
+
+# Not fastmath: the sample positions must round exactly as numpy's float32 expression
+# ``rint(y - d * off)`` does (no fused multiply-add), so the gains are the same to the bit.
+@numba.njit(parallel=True, cache=True, nogil=True)
+def gain_samples(lf, ys, xs, d_samples, offsets, scale, out):  # pragma: no cover - compiled
+    """The shading gains' samples (:func:`lfstream.codec.shading.measure_gains`): view (a, b)
+    read at ``(ys[i], xs[j]) - d_samples[i, j] * offsets[a, b]`` (rounded half to even,
+    clamped to the view), times ``scale``; the views' sample grids stacked along the rows.
+
+    Args:
+        lf: (U, V, H, W, C) uint8 or float32; ys (n_y,), xs (n_x,) float32 sample rows and
+            columns; d_samples: (n_y, n_x) float32 disparity there (zeros: no compensation);
+            offsets: (U, V, 2) float32 (:func:`lfstream.lightfield.view_offsets`); scale:
+            float32 factor.
+        out: (U * V * n_y, n_x, C) float32, overwritten; view (a, b) in rows
+            ``(a * V + b) * n_y ...``.
+    """
+    n_u, n_v, h, w, c = lf.shape
+    n_y = ys.shape[0]
+    hi_y = np.float32(h - 1)
+    hi_x = np.float32(w - 1)
+    zero = np.float32(0.0)
+    for k in numba.prange(n_u * n_v):
+        a, b = k // n_v, k % n_v
+        oy = offsets[a, b, 0]
+        ox = offsets[a, b, 1]
+        view = lf[a, b]
+        for i in range(n_y):
+            for j in range(xs.shape[0]):
+                dd = d_samples[i, j]
+                sy = np.int64(min(max(np.rint(ys[i] - dd * oy), zero), hi_y))
+                sx = np.int64(min(max(np.rint(xs[j] - dd * ox), zero), hi_x))
+                for ch in range(c):
+                    out[k * n_y + i, j, ch] = np.float32(view[sy, sx, ch]) * scale

@@ -73,30 +73,33 @@ def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3, present: np.
     gh = max(1, min(grid, len(ys)))
     gw = max(1, min(int(round(grid * w / max(h, 1))), len(xs)))
     scale = np.float32(1 / 255.0) if x.dtype == np.uint8 else np.float32(1.0)
-    if disparity is None:
-        samples = x[:, :, ::step, ::step]
-    else:
-        from lfstream.lightfield import view_offsets
+    from lfstream.codec._kernels import gain_samples
+    from lfstream.lightfield import view_offsets
 
+    if disparity is None:
+        d_samples = np.zeros((len(ys), len(xs)), np.float32)
+    else:
         d = np.asarray(disparity, np.float32)
         # the map's value at each sample: nearest cell of the (coarser) map
         dy = np.minimum((ys * d.shape[0]) // h, d.shape[0] - 1)
         dx = np.minimum((xs * d.shape[1]) // w, d.shape[1] - 1)
-        d_samples = d[dy[:, None], dx[None, :]]
-        offsets = view_offsets((u, v), axes)[:, :, None, None, :]  # (U, V, 1, 1, 2)
-        # all views' sample positions in one pass (the centre view's are the samples themselves)
-        yf, xf = ys.astype(np.float32)[:, None], xs.astype(np.float32)[None, :]
-        sy = np.clip(np.rint(yf - d_samples * offsets[..., 0]), 0, h - 1).astype(np.intp)
-        sx = np.clip(np.rint(xf - d_samples * offsets[..., 1]), 0, w - 1).astype(np.intp)
-        # one flat gather (numpy's four-array fancy indexing took ~3 ms for 7x7 views)
-        view_base = (np.arange(u * v) * (h * w)).reshape(u, v, 1, 1)
-        samples = np.ascontiguousarray(x).reshape(-1, c).take((view_base + sy * w + sx).ravel(), axis=0)
-        samples = samples.reshape(u, v, len(ys), len(xs), c)
-    cells = np.empty((u, v, gh, gw, c), np.float32)
-    for a in range(u):
-        for b in range(v):
-            view = samples[a, b].astype(np.float32) * scale
-            cells[a, b] = cv2.resize(view, (gw, gh), interpolation=cv2.INTER_AREA).reshape(gh, gw, c)
+        d_samples = np.ascontiguousarray(d[dy[:, None], dx[None, :]])
+    # each view is read where the centre's samples appear in it (``x - d * (u - u0)``), all
+    # views' samples in one parallel pass, their grids stacked along the rows, and averaged
+    # into cells by one area resize: the same cells as a resize per view (whole cells per
+    # view, the same weights) in under a millisecond a 7x7x375x540 frame, where numpy's
+    # gather and a resize per view took about 4
+    src = x if x.dtype in (np.uint8, np.float32) else x.astype(np.float32)
+    n = u * v
+    samples = np.empty((n * len(ys), len(xs), c), np.float32)
+    gain_samples(np.ascontiguousarray(src), ys.astype(np.float32), xs.astype(np.float32), d_samples,
+                 view_offsets((u, v), axes), scale, samples)
+    if c <= 4:  # OpenCV 5 resizes up to four channels at once
+        cells = cv2.resize(samples, (gw, n * gh), interpolation=cv2.INTER_AREA).reshape(n * gh, gw, c)
+    else:
+        cells = np.stack([cv2.resize(np.ascontiguousarray(samples[..., k]), (gw, n * gh), interpolation=cv2.INTER_AREA)
+                          for k in range(c)], axis=-1)
+    cells = cells.reshape(u, v, gh, gw, c)
     if channels == 1:
         cells = cells.mean(-1, keepdims=True)
     ref = cells[u // 2, v // 2]

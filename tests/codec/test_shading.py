@@ -161,6 +161,52 @@ def test_parallax_compensated_cells_measure_shading_not_content(seed):
     np.testing.assert_array_equal(measure_gains(lf, 4, disparity=np.zeros((30, 40), np.float32)), measure_gains(lf, 4))
 
 
+def reference_gains(lf, grid, channels, disparity, axes):
+    """measure_gains as plain numpy and one OpenCV area resize per view (what the fused
+    gather replaced): every view read at the rounded, clamped positions ``y - d * off``."""
+    import cv2
+
+    from lfstream.lightfield import view_offsets
+
+    u, v, h, w, c = lf.shape
+    step = max(1, min(h, w) // (8 * grid))
+    ys, xs = np.arange(0, h, step), np.arange(0, w, step)
+    gh, gw = max(1, min(grid, len(ys))), max(1, min(int(round(grid * w / h)), len(xs)))
+    d = np.zeros((1, 1), np.float32) if disparity is None else np.asarray(disparity, np.float32)
+    d_s = d[np.minimum((ys * d.shape[0]) // h, d.shape[0] - 1)[:, None], np.minimum((xs * d.shape[1]) // w,
+                                                                                     d.shape[1] - 1)[None, :]]
+    off = view_offsets((u, v), axes)
+    scale = np.float32(1 / 255.0) if lf.dtype == np.uint8 else np.float32(1.0)
+    cells = np.empty((u, v, gh, gw, c), np.float32)
+    for a in range(u):
+        for b in range(v):
+            sy = np.clip(np.rint(ys.astype(np.float32)[:, None] - d_s * off[a, b, 0]), 0, h - 1).astype(np.intp)
+            sx = np.clip(np.rint(xs.astype(np.float32)[None, :] - d_s * off[a, b, 1]), 0, w - 1).astype(np.intp)
+            view = lf[a, b][sy, sx].astype(np.float32) * scale
+            cells[a, b] = cv2.resize(view, (gw, gh), interpolation=cv2.INTER_AREA).reshape(gh, gw, c)
+    if channels == 1:
+        cells = cells.mean(-1, keepdims=True)
+    return ((cells + 0.02) / (cells[u // 2, v // 2] + 0.02)).astype(np.float32)
+
+
+@pytest.mark.parametrize("views,size,grid,channels,axes,dtype", [
+    (7, (75, 101), 4, 3, None, np.uint8),  # a ragged size: cells of fractional width
+    (5, (96, 128), 3, 1, np.float32([[-1.05, 0.03], [0.02, 1.0]]), np.uint8),  # axes off the convention
+    (13, (40, 60), 6, 3, None, np.uint8),  # many views, small cells
+    (3, (64, 96), 4, 3, None, np.float32),
+])
+def test_the_fused_gain_samples_equal_a_per_view_numpy_reference(views, size, grid, channels, axes, dtype):
+    """The parallel gather and one stacked area resize give the reference's gains to the bit,
+    with and without the disparity (samples out of the view clamped to its border)."""
+    clip = synth_clip(1, views, size, seed=4, vignetting=0.4, motion=0, camera_pan=0, disparity_range=(-3.0, 3.0))
+    lf = clip.lf[0] if dtype == np.uint8 else clip.lf[0].astype(np.float32) / np.float32(255)
+    d = np.ascontiguousarray(clip.disparity[0, views // 2, views // 2, ::4, ::4], np.float32)  # as a hint is sent
+    for disparity in (None, d, 4 * d):  # 4 * d: most samples of the outer views clamped
+        want = reference_gains(lf, grid, channels, disparity, axes)
+        got = measure_gains(lf, grid, channels, disparity=disparity, axes=axes)
+        assert got.dtype == np.float32 and np.array_equal(got, want)
+
+
 def test_coded_key_maps_are_exact_smaller_than_zstd_and_version_1_still_decodes(shaded_gains):
     """A key map (version 3, context coded) decodes to exactly the quantised gains; the
     zstd payload it replaced (version 1) is larger and still decodes to the same."""
