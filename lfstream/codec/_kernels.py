@@ -813,7 +813,7 @@ def gain_samples(lf, ys, xs, d_samples, offsets, scale, out):  # pragma: no cove
     clamped to the view), times ``scale``; the views' sample grids stacked along the rows.
 
     Args:
-        lf: (U, V, H, W, C) uint8 or float32; ys (n_y,), xs (n_x,) float32 sample rows and
+        lf: (U, V, H, W, C) uint8 or float; ys (n_y,), xs (n_x,) float32 sample rows and
             columns; d_samples: (n_y, n_x) float32 disparity there (zeros: no compensation);
             offsets: (U, V, 2) float32 (:func:`lfstream.lightfield.view_offsets`); scale:
             float32 factor.

@@ -89,7 +89,7 @@ def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3, present: np.
     # into cells by one area resize: the same cells as a resize per view (whole cells per
     # view, the same weights) in under a millisecond a 7x7x375x540 frame, where numpy's
     # gather and a resize per view took about 4
-    src = x if x.dtype in (np.uint8, np.float32) else x.astype(np.float32)
+    src = x if x.dtype in (np.uint8, np.float32, np.float64) else x.astype(np.float32)  # no float copy of a float LF
     n = u * v
     samples = np.empty((n * len(ys), len(xs), c), np.float32)
     gain_samples(np.ascontiguousarray(src), ys.astype(np.float32), xs.astype(np.float32), d_samples,

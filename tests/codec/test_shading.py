@@ -194,12 +194,13 @@ def reference_gains(lf, grid, channels, disparity, axes):
     (5, (96, 128), 3, 1, np.float32([[-1.05, 0.03], [0.02, 1.0]]), np.uint8),  # axes off the convention
     (13, (40, 60), 6, 3, None, np.uint8),  # many views, small cells
     (3, (64, 96), 4, 3, None, np.float32),
+    (3, (64, 96), 4, 1, None, np.float64),  # read as it is: no float32 copy of the light field
 ])
 def test_the_fused_gain_samples_equal_a_per_view_numpy_reference(views, size, grid, channels, axes, dtype):
     """The parallel gather and one stacked area resize give the reference's gains to the bit,
     with and without the disparity (samples out of the view clamped to its border)."""
     clip = synth_clip(1, views, size, seed=4, vignetting=0.4, motion=0, camera_pan=0, disparity_range=(-3.0, 3.0))
-    lf = clip.lf[0] if dtype == np.uint8 else clip.lf[0].astype(np.float32) / np.float32(255)
+    lf = clip.lf[0] if dtype == np.uint8 else clip.lf[0].astype(dtype) / dtype(255)
     d = np.ascontiguousarray(clip.disparity[0, views // 2, views // 2, ::4, ::4], np.float32)  # as a hint is sent
     for disparity in (None, d, 4 * d):  # 4 * d: most samples of the outer views clamped
         want = reference_gains(lf, grid, channels, disparity, axes)
