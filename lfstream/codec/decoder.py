@@ -39,8 +39,8 @@ HANCE_MODES = ("auto", "on", "off")
 # +0.17/-0.07/-0.21 dB, cotton and lytro_translucent +0.04..+0.32 (bench/networks.py, 2026-11-24).
 HANCE_MAX_QUALITY = {"fast": 60, "paper": 70}
 #: Presets "auto" runs on a CUDA device only: on the 2-core CPU the fast network costs
-#: 84 ms a 375 x 540 view (two threads), 80 % of the rest of a 7x7 decode; ``hance="on"``
-#: runs it anywhere.
+#: 84-107 ms a 375 x 540 view (two threads; 90 ms in its manifest entry), about twice the
+#: rest of a 7x7 decode (~45 ms); ``hance="on"`` runs it anywhere.
 HANCE_AUTO_GPU_ONLY = ("fast",)
 #: Frames per network batch the decoder accepts.
 BATCH_RANGE = (1, 256)
