@@ -199,10 +199,11 @@ def warp_views_batched(
         rows, row_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(h, gains.shape[3]))
         cols, col_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(w, gains.shape[4]))
         gains = gains.reshape(b, u * v, *gains.shape[3:])
-    splat = None  # (B, U*V) bool: the views each frame splats
+    splat = splat_host = None  # (B, U*V) bool: the views each frame splats (on the device; on the host)
     if occlusion and view_disparities is None:
-        splat = torch.from_numpy(np.stack([_splat_mask(mx, my, grid_offsets, SPLAT_TOLERANCE_PX)
-                                           for mx, my in _fold_bounds(d).tolist()])).to(dev)
+        splat_host = np.stack([_splat_mask(mx, my, grid_offsets, SPLAT_TOLERANCE_PX)
+                               for mx, my in _fold_bounds(d).tolist()])
+        splat = torch.from_numpy(splat_host).to(dev)
     out = torch.empty((b, u * v, h, w, c), dtype=torch.uint8, device=dev)
     step = max(1, chunk_pixels // max(1, b * h * w))
     ys = torch.arange(h, device=dev, dtype=torch.float32).view(1, 1, h, 1)
@@ -214,7 +215,7 @@ def warp_views_batched(
         dv = offsets[k0:k1, 1].view(1, n, 1, 1)
         if view_disparities is not None:
             maps = view_disparities[:, k0:k1]
-        elif splat is not None and bool(splat[:, k0:k1].any()):
+        elif splat is not None and splat_host[:, k0:k1].any():  # the host copy: no device sync per pass
             still = (~splat[:, k0:k1]).view(b, n, 1, 1).expand(b, n, h, w)  # never the centre view
             maps = torch.where(still, d, _fill_holes(_splat(d, du, dv), d))
         else:
