@@ -33,10 +33,10 @@ from lfstream.codec.warp_batched import warp_views_batched
 from lfstream.synth import synth_clip
 
 
-def decoded_frames(frames: int, views: int, size: tuple[int, int], runs: int) -> tuple[list, float]:
+def decoded_frames(frames: int, views: int, size: tuple[int, int], runs: int) -> tuple[list, float, bytes]:
     """The default encode of ``frames`` distinct frames, decoded (the warp's inputs), and the
     CPU's time for a frame's part before the warp: the centre view (JPEG and post-filter) and
-    the hint (edge-aware up-sampling), in ms."""
+    the hint (edge-aware up-sampling), in ms, and the stream."""
     clip = synth_clip(frames, views, size, seed=21, noise=2.0, vignetting=0.3)
     data = lfstream.encode(clip.lf)
     fh = io.BytesIO(data)
@@ -48,7 +48,7 @@ def decoded_frames(frames: int, views: int, size: tuple[int, int], runs: int) ->
         centre = decoder.decode_centres([packet])[0]
         HintDecoder().decode_with_axes(packet.hint, header.size, guide=centre, frame=packet.seq)
 
-    return list(iter_decode(io.BytesIO(data), hance="off")), timeit(before_warp, runs=runs)["median_s"] * 1e3
+    return list(iter_decode(io.BytesIO(data), hance="off")), timeit(before_warp, runs=runs)["median_s"] * 1e3, data
 
 
 def main(argv=None) -> dict:
@@ -63,7 +63,7 @@ def main(argv=None) -> dict:
     cuda = device.type == "cuda"
     batch = args.batch or (30 if cuda else 2)
     runs = 1 if quick else args.runs
-    frames, before_ms = decoded_frames(max(1, min(args.frames, batch)), views, size, runs)
+    frames, before_ms, stream = decoded_frames(max(1, min(args.frames, batch)), views, size, runs)
     pick = [frames[k % len(frames)] for k in range(batch)]
     label = f"{batch} x {views}x{views}x{size[0]}x{size[1]}"
     shape = (views, views)
@@ -86,9 +86,25 @@ def main(argv=None) -> dict:
         warp_views_batched(*on_device[:2], shape, gains=on_device[2], axes=pick[0].axes)
         sync()
 
+    def resident_flat():  # every view with the centre map: the splat's share of the time
+        warp_views_batched(*on_device[:2], shape, gains=on_device[2], axes=pick[0].axes, occlusion=False)
+        sync()
+
     def round_trip():
         c, d, g = (x.to(device, non_blocking=True) for x in (centres, disps, gains))
         warp_views_batched(c, d, shape, gains=g, axes=pick[0].axes).cpu()
+
+    # page-locked host buffers: the copies run at the bus's rate (a pageable copy is staged)
+    pinned_in = [x.pin_memory() for x in (centres, disps, gains)] if cuda else None
+    pinned_out = torch.empty((batch, *shape, *size, 3), dtype=torch.uint8, pin_memory=True) if cuda else None
+
+    def pinned_trip():
+        c, d, g = (x.to(device, non_blocking=True) for x in pinned_in)
+        pinned_out.copy_(warp_views_batched(c, d, shape, gains=g, axes=pick[0].axes), non_blocking=True)
+        sync()
+
+    def whole_decode():  # the stream's frames in one batch: centre and hint on the CPU, the warp on the device
+        list(iter_decode(io.BytesIO(stream), hance="off", device=str(device), batch=len(frames)))
 
     ref = warp_views(pick[0].centre, pick[0].disparity, shape, gains=pick[0].gains, axes=pick[0].axes)
     got = warp_views_batched(*on_device[:2], shape, gains=on_device[2], axes=pick[0].axes)[0].cpu().numpy()
@@ -96,9 +112,12 @@ def main(argv=None) -> dict:
     rows = []
     for name, fn, dev in (("kernel (numba, all cores)", kernel, "cpu"), ("batched, inputs on the device", resident,
                                                                           str(device)),
-                          ("batched, with the copies", round_trip, str(device))):
+                          ("batched, inputs on the device, no splat", resident_flat, str(device)),
+                          ("batched, with the copies", round_trip, str(device)),
+                          *((("batched, copies via pinned buffers", pinned_trip, str(device)),) if cuda else ()),
+                          (f"whole decode of the {len(frames)}-frame stream", whole_decode, str(device))):
         t = timeit(fn, runs=runs)
-        lfs = batch / t["median_s"]
+        lfs = (len(frames) if name.startswith("whole") else batch) / t["median_s"]
         rows.append({"lf": label, "stage": f"warp: {name}", "device": dev, "lf_per_s": lfs,
                      "ms_per_call": t["median_s"] * 1e3, "iqr_ms": t["iqr_s"] * 1e3})
         print(f"{label:24s} warp: {name:32s} {dev:6s} {lfs:9.1f} LF/s  ({t['median_s'] * 1e3:.1f} ms a call)")

@@ -141,3 +141,39 @@ def test_cuda_agrees_with_the_cpu(rng):
     gpu = warp_views_batched(torch.from_numpy(centre[None]).cuda(), torch.from_numpy(disp[None]).cuda(), (5, 5),
                              gains=gains.cuda())
     _assert_within_a_level(gpu.cpu().numpy(), cpu.numpy())
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+@pytest.mark.parametrize("case", ["plain", "gains", "gain_per_channel", "per_view", "chunked"])
+def test_the_fused_cuda_kernel_agrees_with_the_tensor_path(case, rng, monkeypatch):
+    """The one-kernel warp (Triton, lfstream/codec/warp_triton.py) against the tensor path on
+    the same CUDA device and against the CPU kernel: frames that splat and frames that do not,
+    per-frame gains, Depth-Net's per-view maps, several passes."""
+    pytest.importorskip("triton")
+    from lfstream.codec import warp_batched
+
+    centre, steep = _scene(13, size=(37, 53))
+    ys, xs = np.mgrid[0:37, 0:53].astype(np.float32)
+    gentle = (0.9 * np.sin(xs / 7.0) * np.cos(ys / 5.0)).astype(np.float32)
+    noisy = rng.normal(0, 1.5, (37, 53)).astype(np.float32)
+    disps = [gentle, steep, noisy]
+    centres = torch.from_numpy(np.stack([centre, centre[::-1].copy(), centre[:, ::-1].copy()])).cuda()
+    d = torch.from_numpy(np.stack(disps)).cuda()
+    kw = {}
+    if case in ("gains", "chunked", "gain_per_channel"):
+        gains = rng.uniform(0.75, 1.25, (3, 7, 5, 3, 4, 3 if case == "gain_per_channel" else 1)).astype(np.float32)
+        gains[1] = 1.0  # a frame without gains in a batch with them
+        kw["gains"] = torch.from_numpy(gains).cuda()
+    if case == "per_view":
+        kw["view_disparities"] = torch.from_numpy(rng.uniform(-2, 2, (3, 7, 5, 37, 53)).astype(np.float32)).cuda()
+    if case == "chunked":
+        kw["chunk_pixels"] = 37 * 53 * 3 * 4  # four views a pass
+    assert warp_batched._fused_warp(d.device) is not None
+    fused = warp_views_batched(centres, d, (7, 5), **kw).cpu().numpy()
+    monkeypatch.setattr(warp_batched, "_fused_warp", lambda device: None)
+    tensor = warp_views_batched(centres, d, (7, 5), **kw).cpu().numpy()
+    _assert_within_a_level(fused, tensor)
+    if case != "per_view":
+        for k in range(3):
+            g = None if "gains" not in kw else kw["gains"][k].cpu().numpy()
+            _assert_within_a_level(fused[k], warp_views(centres[k].cpu().numpy(), disps[k], (7, 5), gains=g))
