@@ -38,7 +38,7 @@ def _warp_kernel(centre_ptr, maps_ptr, out_ptr, du_ptr, dv_ptr, gains_ptr, flags
                  col_w_ptr, H, W, VIEW0, s_mb, s_mn, s_ob, s_gb, s_gn, s_gh, s_gw,
                  C: tl.constexpr, CP: tl.constexpr, CG: tl.constexpr, HAS_GAINS: tl.constexpr, BLOCK: tl.constexpr):
     pid = tl.program_id(0)
-    k = tl.program_id(1)  # view of this pass
+    k = tl.program_id(1).to(tl.int64)  # view of this pass (64-bit: offsets past 2^31 elements)
     b = tl.program_id(2).to(tl.int64)  # frame
     p = pid * BLOCK + tl.arange(0, BLOCK)
     inside = p < H * W
@@ -97,7 +97,7 @@ def _warp_kernel(centre_ptr, maps_ptr, out_ptr, du_ptr, dv_ptr, gains_ptr, flags
         g = (g0.to(tl.float64) * wa.to(tl.float64) + (g1 * (1.0 - wa)).to(tl.float64)).to(tl.float32)
         scaled = tl.minimum((val.to(tl.float32) * g + 0.5).to(tl.int32), 255)
         res = tl.where(flag != 0, scaled, res)
-    dst = out_ptr + b * s_ob + ((VIEW0 + k) * H * W + p).to(tl.int64)[:, None] * C + ch[None, :]
+    dst = out_ptr + b * s_ob + ((VIEW0 + k) * H * W + p)[:, None] * C + ch[None, :]
     tl.store(dst, res.to(tl.uint8), mask=both)
 
 
