@@ -444,60 +444,49 @@ def fold_bounds(disp):  # pragma: no cover - compiled
     return mx, my
 
 
-# RGB -> grey as OpenCV's 8-bit COLOR_RGB2GRAY computes it (BT.601 weights in 15-bit fixed
-# point, rounded; equal to it for all 2^24 colours, tests/codec/test_hint.py)
-_GRAY_BITS = 15
-_GRAY_R, _GRAY_G, _GRAY_B = 9798, 19235, 3735
-
-
 @numba.njit(**_ROW)
-def _block_luma_view(img, scale, out):  # pragma: no cover - compiled
-    """``out[i, j]`` = mean of the 8-bit grey of ``img`` over the ``scale x scale`` block
-    ``(i, j)``, divided by 255; a block the view ends inside (a view smaller than one block)
-    averages the pixels it has, as OpenCV's area resampling of them does.
-
-    Each image row is converted to grey in one loop, then added into the block sums one
-    offset inside the block at a time: both loops vectorise (a loop over each block's
-    pixels did not: 3x slower at scale 2).
-    """
-    hs, ws = out.shape
-    h, w = img.shape[0], img.shape[1]
-    flat = img.reshape(h, w * 3)
-    grey = np.empty(w, np.int32)
-    sums = np.empty(ws, np.int32)
-    full = min(ws, w // scale)  # blocks that lie wholly inside the view's width
-    half = np.int32(1 << (_GRAY_BITS - 1))
-    for i in range(hs):
-        y1 = min((i + 1) * scale, h)
-        sums[:] = 0
-        for y in range(i * scale, y1):
-            row = flat[y]
-            for x in range(w):
-                grey[x] = (np.int32(_GRAY_R) * np.int32(row[3 * x]) + np.int32(_GRAY_G) * np.int32(row[3 * x + 1])
-                           + np.int32(_GRAY_B) * np.int32(row[3 * x + 2]) + half) >> np.int32(_GRAY_BITS)
-            for k in range(scale):
-                for j in range(full):
-                    sums[j] += grey[j * scale + k]
-            for j in range(full, ws):
-                for x in range(j * scale, min((j + 1) * scale, w)):
-                    sums[j] += grey[x]
-        for j in range(ws):
-            count = (y1 - i * scale) * (min((j + 1) * scale, w) - j * scale)
-            out[i, j] = (np.float32(sums[j]) * np.float32(1.0 / count)) * np.float32(1.0 / 255.0)
+def _block_mean_row(grey, i, scale, acc, out_row):  # pragma: no cover - compiled
+    """Block row ``i`` of :func:`block_means` for one image; ``acc`` (W,) int32 scratch.
+    The block's rows are added column by column first (contiguous: the loop vectorises),
+    then each block's columns once per block row."""
+    h, w = grey.shape
+    ws = out_row.shape[0]
+    y1 = min((i + 1) * scale, h)
+    acc[:] = 0
+    for y in range(i * scale, y1):
+        row = grey[y]
+        for x in range(w):
+            acc[x] += np.int32(row[x])
+    rows = y1 - i * scale
+    inv_full = np.float32(1.0 / (rows * scale))  # hoisted: a division per block cost more than the sums
+    full = min(ws, w // scale)  # blocks that lie wholly inside the image's width
+    for j in range(full):
+        total = np.int32(0)
+        for k in range(scale):
+            total += acc[j * scale + k]
+        out_row[j] = (np.float32(total) * inv_full) * np.float32(1.0 / 255.0)
+    for j in range(full, ws):
+        x0, x1 = j * scale, min((j + 1) * scale, w)
+        total = np.int32(0)
+        for x in range(x0, x1):
+            total += acc[x]
+        out_row[j] = (np.float32(total) * np.float32(1.0 / (rows * (x1 - x0)))) * np.float32(1.0 / 255.0)
 
 
 @numba.njit(**_PARALLEL)
-def block_luma(lf, keys, scale, out):  # pragma: no cover - compiled
-    """Grey block means of some views of a light field, one view per task: what the plane
-    sweep compares (OpenCV's grey conversion then its area resampling, in one pass over
-    the view instead of three: 0.2 instead of 1.6 ms a 375 x 540 view).
+def block_means(grey, scale, out):  # pragma: no cover - compiled
+    """Block means of 8-bit images, divided by 255: OpenCV's area resampling of them to the
+    bit (integer sums, one rounding); a block an image ends inside (an image smaller than
+    one block) averages the pixels it has, as area resampling does. One block row per task.
 
     Args:
-        lf: (U, V, H, W, 3) uint8; keys: (N, 2) int64 views; scale: block size in pixels.
+        grey: (N, H, W) uint8; scale: block size in pixels.
         out: (N, max(1, H // scale), max(1, W // scale)) float32 in [0, 1], overwritten.
     """
-    for n in numba.prange(keys.shape[0]):
-        _block_luma_view(lf[keys[n, 0], keys[n, 1]], scale, out[n])
+    n_img, hs, ws = out.shape
+    for job in numba.prange(n_img * hs):
+        n, i = job // hs, job % hs
+        _block_mean_row(grey[n], i, scale, np.empty(grey.shape[2], np.int32), out[n, i])
 
 
 # The sweep's column loops are inlined into the row (numba IR inlining): three calls per view
@@ -532,6 +521,37 @@ def _sweep_span(r0, r1, centre, ax, ay, ox, lo, hi, acc):  # pragma: no cover - 
         out[i] += abs(top + ay * (bot - top) - c[i])
 
 
+# The spans of views on the centre's row or column (8 of the 12 sweep views of a 7x7 grid):
+# one interpolation instead of three, half the loads (the fine sweep 12 % faster). Their
+# costs equal _sweep_span's to the bit: fast-math without reassociation (and not inlined
+# into the caller, whose flags would apply), written in the order the compiler evaluates
+# _sweep_span with a zero weight; any other order moved hint maps by 2e-7 and changed the
+# stream bytes of three of the seven shared scenes. tests/codec/test_hint.py compares.
+_NO_REASSOC = dict(fastmath={"nnan", "ninf", "nsz", "arcp", "contract", "afn"}, cache=True, nogil=True)
+
+
+@numba.njit(**_NO_REASSOC)
+def _sweep_span_row(r0, centre, ax, ox, lo, hi, acc):  # pragma: no cover - compiled
+    """:func:`_sweep_span` where the vertical weight is 0 (one row's two taps)."""
+    a0 = r0[lo + ox: hi + ox]
+    a1 = r0[lo + ox + 1: hi + ox + 1]
+    c = centre[lo:hi]
+    out = acc[lo:hi]
+    for i in range(hi - lo):
+        out[i] += abs(a0[i] + ax * (a1[i] - a0[i]) - c[i])
+
+
+@numba.njit(**_NO_REASSOC)
+def _sweep_span_col(r0, r1, centre, ay, ox, lo, hi, acc):  # pragma: no cover - compiled
+    """:func:`_sweep_span` where the horizontal weight is 0 (one column's two taps)."""
+    a0 = r0[lo + ox: hi + ox]
+    b0 = r1[lo + ox: hi + ox]
+    c = centre[lo:hi]
+    out = acc[lo:hi]
+    for i in range(hi - lo):
+        out[i] += abs((a0[i] - c[i]) + ay * (b0[i] - a0[i]))
+
+
 @numba.njit(**_ROW)
 def _sweep_row(images, offsets, s, y, acc):  # pragma: no cover - compiled
     n_j = offsets.shape[0]
@@ -554,7 +574,15 @@ def _sweep_row(images, offsets, s, y, acc):  # pragma: no cover - compiled
         lo = min(max(-ox, 0), w)  # the first column whose left tap is inside the row
         hi = max(min(w - 1 - ox, w), lo)  # the first column whose right tap is not
         _sweep_edge(r0, r1, centre, ax, ay, ox, 0, lo, acc)
-        _sweep_span(r0, r1, centre, ax, ay, ox, lo, hi, acc)
+        if ay == 0.0:
+            # a view on the centre's row (8 of the 12 sweep views of a 7x7 grid are on its
+            # row or column): no vertical interpolation; top + 0 * (bot - top) is top
+            # exactly, so the same cost to the bit at half the loads
+            _sweep_span_row(r0, centre, ax, ox, lo, hi, acc)
+        elif ax == 0.0:  # on the centre's column: no horizontal interpolation (same argument)
+            _sweep_span_col(r0, r1, centre, ay, ox, lo, hi, acc)
+        else:
+            _sweep_span(r0, r1, centre, ax, ay, ox, lo, hi, acc)
         _sweep_edge(r0, r1, centre, ax, ay, ox, hi, w, acc)
     inv = np.float32(1.0 / n_j)
     for x in range(w):

@@ -29,15 +29,13 @@ def _bilinear(img, y, x):
 def test_grey_block_means_equal_opencvs_conversion_and_area_resampling(rng):
     import cv2
 
-    from lfstream.codec._kernels import block_luma
+    from lfstream.codec._kernels import block_means
 
-    # every 8-bit colour: the fixed-point grey is OpenCV's COLOR_RGB2GRAY to the level
-    v = np.arange(1 << 24, dtype=np.uint32)
-    colours = np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], -1).astype(np.uint8).reshape(1, 1, 4096, 4096, 3)
-    out = np.empty((1, 4096, 4096), np.float32)
-    block_luma(colours, np.zeros((1, 2), np.int64), 1, out)
-    grey = cv2.cvtColor(colours[0, 0], cv2.COLOR_RGB2GRAY)
-    np.testing.assert_array_equal(np.rint(out[0] * 255).astype(np.uint8), grey)
+    # blocks of one pixel: every 8-bit level divided by 255, as the float conversion does
+    levels = np.arange(256, dtype=np.uint8).reshape(1, 16, 16)
+    out = np.empty((1, 16, 16), np.float32)
+    block_means(levels, 1, out)
+    np.testing.assert_array_equal(out, levels.astype(np.float32) * np.float32(1 / 255.0))
     # block means as OpenCV's area resampling of that grey, to the bit at the working scales in use
     lf = rng.integers(0, 256, (3, 3, 37, 53, 3), dtype=np.uint8)
     keys = [(1, 1), (0, 2), (2, 0)]
@@ -55,8 +53,9 @@ def test_grey_block_means_equal_opencvs_conversion_and_area_resampling(rng):
 
 
 def test_sweep_cost_matches_a_plain_reference(rng):
-    images = rng.random((4, 9, 11), dtype=np.float32)
-    offsets = np.float32([[-1, -1], [0, 2], [1.5, -0.5]])
+    images = rng.random((5, 9, 11), dtype=np.float32)
+    # views off both axes, on the centre's row and on its column (the kernel's three spans)
+    offsets = np.float32([[-1, -1], [0, 2], [1.5, -0.5], [-2, 0]])
     # the last shift moves the outer views' taps past the whole row (the clamped path)
     shifts = np.float32([-1.3, 0.0, 0.4, 2.2, -6.1])
     cost = np.empty((5, 9, 11), np.float32)
@@ -67,6 +66,27 @@ def test_sweep_cost_matches_a_plain_reference(rng):
                 ref = np.mean([abs(_bilinear(images[1 + j], y - s * du, x - s * dv) - images[0, y, x])
                                for j, (du, dv) in enumerate(offsets)])
                 assert cost[k, y, x] == pytest.approx(ref, abs=1e-5)
+
+
+def test_the_on_axis_spans_equal_the_general_span_to_the_bit(rng):
+    """A view on the centre's row (vertical weight 0) or column (horizontal weight 0) takes
+    a span with one interpolation; its costs must equal the general span's bit for bit,
+    or the hint's bytes change."""
+    from lfstream.codec._kernels import _sweep_span, _sweep_span_col, _sweep_span_row
+
+    w = 301
+    r0, r1, centre, acc = (rng.standard_normal(w).astype(np.float32) for _ in range(4))
+    for ox in (-3, 0, 2):
+        lo, hi = max(-ox, 0), w - 1 - max(ox, 0)
+        for weight in np.float32([0.0, 0.25, 0.37, 0.999]):
+            ref, got = acc.copy(), acc.copy()
+            _sweep_span(r0, r1, centre, weight, np.float32(0), ox, lo, hi, ref)
+            _sweep_span_row(r0, centre, weight, ox, lo, hi, got)
+            np.testing.assert_array_equal(got, ref)
+            ref, got = acc.copy(), acc.copy()
+            _sweep_span(r0, r1, centre, np.float32(0), weight, ox, lo, hi, ref)
+            _sweep_span_col(r0, r1, centre, weight, ox, lo, hi, got)
+            np.testing.assert_array_equal(got, ref)
 
 
 def test_winner_subpixel_finds_the_parabola_minimum():
