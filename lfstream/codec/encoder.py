@@ -63,29 +63,6 @@ def preset_coding(preset: str) -> CentreCoding:
     return PRESETS[preset]
 
 
-class PendingPacket:
-    """A frame :meth:`Encoder.begin_frame` has started: its hint and gains are in the
-    packet, its centre view is being coded (a future) or coded (bytes)."""
-
-    def __init__(self, encoder: Encoder, frame: np.ndarray, packet: Packet, image) -> None:
-        self._encoder, self._frame, self._packet, self._image = encoder, frame, packet, image
-        self._done: Packet | None = None
-
-    def result(self) -> Packet:
-        """The frame's packet (waits for its centre view; adds the residual layer where the
-        encoder codes one)."""
-        if self._done is None:
-            from dataclasses import replace
-
-            image = self._image if isinstance(self._image, bytes) else self._image.result()
-            packet = replace(self._packet, image=image)
-            enc, frame = self._encoder, self._frame
-            if enc.residual is not None and frame.shape[0] * frame.shape[1] > 1:
-                packet = enc.add_residual(packet, frame, enc.residual)
-            self._done, self._frame, self._image = packet, None, None
-        return self._done
-
-
 @dataclass
 class Encoder:
     """Encodes LF frames into packets.
@@ -211,17 +188,6 @@ class Encoder:
         ``present`` marks the views that exist (a light field read with missing views); the
         centre view must be among them. The decoder reconstructs every view.
         """
-        return self.begin_frame(lf, seq, timestamp_us, present).result()
-
-    def begin_frame(self, lf: np.ndarray, seq: int, timestamp_us: int,
-                    present: np.ndarray | None = None) -> PendingPacket:
-        """:meth:`encode_frame` in two steps: the hint and the gains now (so
-        :attr:`last_hint`, :attr:`last_gains` and :attr:`last_ring_luma` describe this
-        frame on return), the centre view's coding on a worker thread meanwhile; the packet
-        from the result's ``result()``. A caller with more work on the hint (the default's
-        prediction check, :func:`lfstream.codec.rate.choose_default`) does it before waiting:
-        the post-filter choice of a key frame (7-11 ms) then overlaps it too. Frames must be
-        finished in order (``result()`` before the next frame begins)."""
         check_lf(lf, allow_video=False)
         if present is not None:
             present = np.asarray(present, bool)
@@ -238,23 +204,24 @@ class Encoder:
         frame = to_uint8(np.asarray(lf))
         centre = centre_view(frame)
         hint = b""
-        image = None
         if self.keys_views:  # the centre view is the views' key frame: coded with them (add_residual)
             image = b""
             if self.depth_hint:
                 hint = self._hints.encode(frame, seq, present)
         elif self.depth_hint:
             # the centre view's coding (and the post-filter choice, 7-11 ms on key frames)
-            # does not depend on the hint or the gains: overlapped with them on a worker
-            # thread (measured on lytro_bikes, 2 cores: a single-frame encode 24.8 -> 20.2
-            # ms); same bytes
-            image = in_background(lambda: self._code_centre(centre))
+            # does not depend on the hint: overlapped with it on a worker thread (measured on
+            # lytro_bikes, 2 cores: a single-frame encode 24.8 -> 20.2 ms); same bytes
+            centre_job = in_background(lambda: self._code_centre(centre))
             hint = self._hints.encode(frame, seq, present)
+            image = centre_job.result()
         else:
             image = self._code_centre(centre)
         gain = self._gain_payload(frame, seq, present, bool(hint))
-        return PendingPacket(self, frame, Packet(seq=seq, timestamp_us=timestamp_us, image=b"", hint=hint, gain=gain),
-                             image)
+        packet = Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
+        if self.residual is not None and frame.shape[0] * frame.shape[1] > 1:
+            packet = self.add_residual(packet, frame, self.residual)
+        return packet
 
     def _gain_payload(self, frame: np.ndarray, seq: int, present: np.ndarray | None, hinted: bool,
                       measured: np.ndarray | None = None) -> bytes:

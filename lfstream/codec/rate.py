@@ -246,14 +246,12 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
     enc = Encoder(quality=quality, depth_hint=True, hint_options=opts, gain_grid=gain_grid,
                   preset=preset or default_preset(frame.shape[:2], frame.shape[2:4]), post_filter=post_filter,
                   device=device)
-    # the check needs the hint and the gains, not the centre view: it runs while the centre
-    # view is coded (and its post-filter chosen) on a worker thread
-    pending = enc.begin_frame(frame, 0, 0, present)
+    first = enc.encode_frame(frame, 0, 0, present)
     u, v = frame.shape[:2]
     cells = min(frame.shape[2:4]) // enc.last_hint.scale
     if u * v == 1 or (present is not None and not np.all(present)) or cells < PREDICTION_CHECK_MIN_CELLS:
         # nothing to predict, views a sequence would not carry, or too few cells to tell
-        return DefaultChoice(enc, pending.result(), None)
+        return DefaultChoice(enc, first, None)
     frame8 = np.ascontiguousarray(to_uint8(np.asarray(frame)))
     coarse = enc.coarser_first_hint() if hint_options is None else None
     coarse_check = coarse_gains = None
@@ -270,7 +268,6 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
                                                                disparity=coarse.values(), axes=coarse.axes))
     db = prediction_psnr(frame8, enc.last_hint, enc.last_gains, present, enc.last_ring_luma)
     db_coarse = None if coarse_check is None else coarse_check.result()
-    first = pending.result()
     if db >= PREDICTION_FLOOR_DB:
         if db_coarse is not None:
             if db_coarse >= db - HINT_COARSEN_MAX_LOSS_DB:

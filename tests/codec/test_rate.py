@@ -296,7 +296,7 @@ def test_the_fast_presets_quick_search_codes_each_frame_once_and_is_the_encoders
     from lfstream.codec.encoder import Encoder
 
     calls = {"frames": 0}
-    real = Encoder.begin_frame  # every frame's coding starts here (encode_frame calls it)
+    real = Encoder.encode_frame
 
     def counted(self, *a, **k):
         calls["frames"] += 1
@@ -305,7 +305,7 @@ def test_the_fast_presets_quick_search_codes_each_frame_once_and_is_the_encoders
     def no_residual(*a, **k):
         raise AssertionError("the quick search coded a residual where the centre view lands the target")
 
-    monkeypatch.setattr(Encoder, "begin_frame", counted)
+    monkeypatch.setattr(Encoder, "encode_frame", counted)
     monkeypatch.setattr(residual_mod, "encode_residual", no_residual)
     # 0.08 bpp: the JPEG lands it at quality 75, well inside the quick search's range (at 0.12
     # it needs 91 since the JFIF segment went: the residual candidates' regime)
