@@ -152,8 +152,10 @@ def summarise(base: list[dict], head: list[dict], seed: int = 0, resamples: int 
 
 
 def _worktree(rev: str, into: Path) -> Path:
-    subprocess.run(["git", "worktree", "add", "--detach", "--force", str(into), rev], cwd=ROOT, check=True,
-                   capture_output=True, text=True)
+    proc = subprocess.run(["git", "worktree", "add", "--detach", "--force", str(into), rev], cwd=ROOT,
+                          capture_output=True, text=True, check=False)
+    if proc.returncode:
+        raise SystemExit(f"ab: cannot check out {rev!r}: {' '.join(proc.stderr.strip().splitlines()[-1:])}")
     return into
 
 
