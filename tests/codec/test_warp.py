@@ -138,6 +138,24 @@ def test_fused_warp_same_bytes_at_any_thread_count(rng):
     assert all((o == outs[0]).all() for o in outs)
 
 
+@pytest.mark.parametrize("channels", [3, 4])
+def test_views_on_the_centres_row_and_column_sample_two_taps_to_the_bit(channels, rng):
+    """A view on the centre's row (no vertical displacement) or column samples two taps,
+    not four: the same bytes as the four-tap path, which runs where axes move those views by
+    a displacement too small to change any position (1e-30 px per view step)."""
+    centre, disp = _scene(seed=5, size=(40, 52))
+    img = np.ascontiguousarray(np.concatenate([centre, centre[..., :1]], axis=-1)[..., :channels])
+    gains = rng.uniform(0.8, 1.2, (5, 5, 3, 3, channels)).astype(np.float32)
+    nudged = np.float32([[1.0, 1e-30], [1e-30, 1.0]])  # every view off both axes, by nothing
+    offsets = view_offsets((5, 5), nudged)
+    assert (offsets[2, [0, 1, 3, 4], 0] != 0).all() and (offsets[[0, 1, 3, 4], 2, 1] != 0).all()
+    for g in (None, gains):
+        for occlusion in (True, False):
+            two_taps = warp_views(img, disp, (5, 5), occlusion=occlusion, gains=g)
+            four_taps = warp_views(img, disp, (5, 5), occlusion=occlusion, gains=g, axes=nudged)
+            np.testing.assert_array_equal(two_taps, four_taps)
+
+
 def test_fused_warp_survives_huge_disparities():
     centre, _ = _scene(seed=3, size=(16, 18))
     for d in (1e6, -1e6, 3e38):
