@@ -229,4 +229,8 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except KeyboardInterrupt:  # the worktrees are removed by main's finally
+        print("ab: interrupted", file=sys.stderr)
+        sys.exit(130)
