@@ -143,15 +143,16 @@ def _gain_columns(gains: torch.Tensor, cols: torch.Tensor, col_w: torch.Tensor) 
 
 
 def _fused_warp(device: torch.device):
-    """The one-kernel warp (:func:`lfstream.codec.warp_triton.warp_pixels`) on a CUDA device
-    where Triton imports (it ships with CUDA builds of torch); ``None``: the torch path."""
+    """The fused kernels (:mod:`lfstream.codec.warp_triton`: ``splat_maps`` and
+    ``warp_pixels``) on a CUDA device where Triton imports (it ships with CUDA builds of
+    torch); ``None``: the torch path."""
     if device.type != "cuda":
         return None
     try:
-        from lfstream.codec.warp_triton import warp_pixels
+        from lfstream.codec import warp_triton
     except ImportError:
         return None
-    return warp_pixels
+    return warp_triton
 
 
 def warp_views_batched(
@@ -240,18 +241,17 @@ def warp_views_batched(
         dv = offsets[k0:k1, 1].view(1, n, 1, 1)
         if view_disparities is not None:
             maps = view_disparities[:, k0:k1]
-        elif splat is not None and splat_host[:, k0:k1].any() and fused is not None:
-            from lfstream.codec.warp_triton import splat_maps
-
-            maps = splat_maps(d, offsets, splat, k0, n)
         elif splat is not None and splat_host[:, k0:k1].any():  # the host copy: no device sync per pass
-            still = (~splat[:, k0:k1]).view(b, n, 1, 1).expand(b, n, h, w)  # never the centre view
-            maps = torch.where(still, d, _fill_holes(_splat(d, du, dv), d))
+            if fused is not None:
+                maps = fused.splat_maps(d, offsets, splat, k0, n)
+            else:
+                still = (~splat[:, k0:k1]).view(b, n, 1, 1).expand(b, n, h, w)  # never the centre view
+                maps = torch.where(still, d, _fill_holes(_splat(d, du, dv), d))
         else:
             maps = d.expand(b, n, h, w)
         if fused is not None:
-            fused(centres, maps, out, offsets, k0, gains, has_gains,
-                  None if gains is None else (rows, row_w), None if gains is None else (cols, col_w))
+            fused.warp_pixels(centres, maps, out, offsets, k0, gains, has_gains,
+                              None if gains is None else (rows, row_w), None if gains is None else (cols, col_w))
             continue
         ix = _floor_int(_fma(maps, dv, xs) * float(_FRAC) + 0.5, float(_TAP_OFFSET))
         iy = _floor_int(_fma(maps, du, ys) * float(_FRAC) + 0.5, float(_TAP_OFFSET))
