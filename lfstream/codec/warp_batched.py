@@ -110,7 +110,7 @@ def _fill_holes(maps: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
 def _bilinear(src: torch.Tensor, idx: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor, stride: int) -> torch.Tensor:
     """Bilinear samples of the padded views ``src`` (B, C, (H + 2) * (W + 2)) int32 at the
     top-left taps ``idx`` (B, 1, N) int64 with 1/1024-pixel fractions ``fx, fy`` (B, 1, N...)
-    int32, as the kernel computes them (:func:`lfstream.codec._kernels._bilinear_lanes`):
+    int32, as the kernel computes them (:func:`lfstream.codec._kernels._sample_at`):
     each row's pair rounded to 8 x the value, then the rows blended.
 
     Shape:
