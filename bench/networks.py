@@ -170,23 +170,21 @@ def bench_refnet(device: str, runs: int, quick: bool) -> list[dict]:
     if manifest_entry("refnet", "fast") is None:
         return rows
     net = load_model("refnet", "fast", device)
+
+    def against_sas(name: str, ref: np.ndarray, out: np.ndarray) -> None:
+        rows.append({"model": "refnet", "lf": name, "psnr_vs_sas": capped(float(np.mean(psnr(ref, out)))),
+                     "ssim_vs_sas": float(np.mean(ssim(ref, out)))})
+        print(f"RefNet {name:18s} vs SaS: {rows[-1]['psnr_vs_sas']:.2f} dB / {rows[-1]['ssim_vs_sas']:.4f}")
+
     for name, lf, _ in synthetic_lfs(2 if quick else 6, (128, 128), seed=9000):
-        ref = focal_stack(lf)
         x = to_network_input(lf, device)[None]
         with torch.inference_mode():
             out = (net(x)[0].permute(0, 2, 3, 1).mul(255).add(0.5).clamp(0, 255).byte().cpu().numpy())
-        rows.append({"model": "refnet", "lf": name, "psnr_vs_sas": capped(float(np.mean(psnr(ref, out)))),
-                     "ssim_vs_sas": float(np.mean(ssim(ref, out)))})
-        print(f"RefNet {name:18s} vs SaS: {rows[-1]['psnr_vs_sas']:.2f} dB / {rows[-1]['ssim_vs_sas']:.4f}")
+        against_sas(name, focal_stack(lf), out)
     # the real 7x7 captures (the "within 35 dB of SaS on real LFs"), whole views
     for name, lf, mask in real_lfs(("lytro_bikes", "lytro_translucent")):
-        if mask is not None or lf.shape[:2] != tuple(net.config.views):
-            continue
-        ref = focal_stack(lf)
-        out = focal_stack(lf, method="refnet", device=device)
-        rows.append({"model": "refnet", "lf": name, "psnr_vs_sas": capped(float(np.mean(psnr(ref, out)))),
-                     "ssim_vs_sas": float(np.mean(ssim(ref, out)))})
-        print(f"RefNet {name:18s} vs SaS: {rows[-1]['psnr_vs_sas']:.2f} dB / {rows[-1]['ssim_vs_sas']:.4f}")
+        if mask is None and lf.shape[:2] == tuple(net.config.views):
+            against_sas(name, focal_stack(lf), focal_stack(lf, method="refnet", device=device))
     size = (128, 160) if quick else (375, 540)
     lf = synth_clip(1, 7, size, seed=1).lf[0]
     x = to_network_input(lf, device)[None]

@@ -114,6 +114,7 @@ def shift_sum_separable(lf, channels, weights, y_int, y_frac, x_int, x_frac, col
         cover = np.empty(n_w, np.float32)
         factor = np.empty(n_w, np.float32)
         expanded = np.empty(wc, np.float32)
+        num = 255.0 if to_uint8 else 1.0
         for y in range(y0, y1):
             for k in range(n_k):
                 acc[:] = 0.0
@@ -137,7 +138,6 @@ def shift_sum_separable(lf, channels, weights, y_int, y_frac, x_int, x_frac, col
                 # same values (the division's operand is clamped only where its result is
                 # discarded: fast-math must not see an infinity)
                 dst = out[k, y]
-                num = 255.0 if to_uint8 else 1.0
                 for x in range(n_w):
                     c_ = cover[x]
                     f = np.float32(num / (scale * max(c_, np.float32(1e-6))))
