@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from lfstream.errors import LFShapeError, LFValueError
-from lfstream.lightfield import dof_image, is_tensor
+from lfstream.lightfield import dof_image, is_tensor, read_only
 
 if TYPE_CHECKING:
     import torch
@@ -216,7 +216,7 @@ def _ssim_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
 
     def rows(a: np.ndarray) -> np.ndarray:
         a = a if a.dtype in (np.uint8, np.float32) else a.astype(np.float32)
-        return np.ascontiguousarray(a).reshape(-1, h, w * c)
+        return read_only(np.ascontiguousarray(a).reshape(-1, h, w * c))  # one kernel signature
 
     xs, ys = rows(x), rows(y)
     if xs.dtype != ys.dtype:

@@ -12,6 +12,7 @@ from lfstream.lightfield import (
     downsample_angular,
     from_mosaic,
     from_sensor,
+    read_only,
     to_mosaic,
     to_sensor,
     to_uint8,
@@ -111,3 +112,15 @@ def test_view_offsets_follow_the_convention_and_the_view_axes():
     assert np.array_equal(view_offsets((3, 5), np.eye(2)), off)
     with pytest.raises(LFValueError, match="axes"):
         view_offsets((3, 5), np.full((2, 2), np.nan))
+
+
+def test_read_only_is_a_view_that_leaves_the_array_writable():
+    a = np.arange(12, dtype=np.float32).reshape(3, 4)
+    ro = read_only(a)
+    assert np.shares_memory(ro, a) and ro.shape == a.shape and ro.dtype == a.dtype  # no copy
+    assert not ro.flags.writeable and a.flags.writeable
+    with pytest.raises(ValueError):
+        ro[0, 0] = 1.0
+    a[0, 0] = 5.0  # the caller's array is untouched and still its to write
+    assert ro[0, 0] == 5.0
+    assert not read_only(ro).flags.writeable  # idempotent on read-only input

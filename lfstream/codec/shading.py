@@ -74,7 +74,7 @@ def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3, present: np.
     gw = max(1, min(int(round(grid * w / max(h, 1))), len(xs)))
     scale = np.float32(1 / 255.0) if x.dtype == np.uint8 else np.float32(1.0)
     from lfstream.codec._kernels import gain_samples
-    from lfstream.lightfield import view_offsets
+    from lfstream.lightfield import read_only, view_offsets
 
     if disparity is None:
         d_samples = np.zeros((len(ys), len(xs)), np.float32)
@@ -92,7 +92,7 @@ def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3, present: np.
     src = x if x.dtype in (np.uint8, np.float32, np.float64) else x.astype(np.float32)  # no float copy of a float LF
     n = u * v
     samples = np.empty((n * len(ys), len(xs), c), np.float32)
-    gain_samples(np.ascontiguousarray(src), ys.astype(np.float32), xs.astype(np.float32), d_samples,
+    gain_samples(read_only(np.ascontiguousarray(src)), ys.astype(np.float32), xs.astype(np.float32), d_samples,
                  view_offsets((u, v), axes), scale, samples)
     if c <= 4:  # OpenCV 5 resizes up to four channels at once
         cells = cv2.resize(samples, (gw, n * gh), interpolation=cv2.INTER_AREA).reshape(n * gh, gw, c)

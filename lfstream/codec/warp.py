@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from lfstream.errors import LFShapeError, LFValueError
-from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_finite, to_uint8, view_offsets
+from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_finite, read_only, to_uint8, view_offsets
 
 #: The largest first-order difference (px) between a view's samples with and without the
 #: z-tested splat at which the splat is skipped (:func:`splat_views`).
@@ -54,7 +54,7 @@ def splat_views(disparity: np.ndarray, offsets: np.ndarray, tolerance: float = S
     """
     from lfstream.codec._kernels import fold_bounds
 
-    mx, my = fold_bounds(np.ascontiguousarray(disparity, np.float32))
+    mx, my = fold_bounds(read_only(np.ascontiguousarray(disparity, np.float32)))
     return _splat_mask(float(mx), float(my), offsets, tolerance)
 
 
@@ -206,6 +206,7 @@ def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, o
         view_disp = np.zeros((0, 0, 1, 1), np.float32)
     out = np.empty((u, v, h, w * c), np.uint8)
     packed = np.empty((h + 2) * (w + 2), np.uint64)  # with a one-pixel border (pack_lanes)
+    src, d, view_disp = read_only(src), read_only(d), read_only(view_disp)  # one signature (read_only)
     for ch0 in range(0, c, _LANES):  # three channels per pass, in the lanes of one uint64
         n_ch = min(_LANES, c - ch0)
         pack_lanes(src, ch0, n_ch, packed)
@@ -240,7 +241,7 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
 
     out = np.empty((u, v, *d.shape), np.float32)
     offsets = view_offsets((u, v), axes)
-    splat_all_views(d, offsets, _occlusion_mask(d, offsets, occlusion), out)
+    splat_all_views(read_only(d), offsets, _occlusion_mask(d, offsets, occlusion), out)
     return out
 
 

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from lfstream.lightfield import check_finite, check_lf, is_tensor
+from lfstream.lightfield import check_finite, check_lf, is_tensor, read_only
 from lfstream.refocus.planes import check_slopes, view_weights
 
 if TYPE_CHECKING:
@@ -77,7 +77,7 @@ def _sas_frame_numpy(lf: np.ndarray, slopes: np.ndarray, w: np.ndarray, to_uint8
     col_cover = (w[None, :, :, None] * _axis_cover(x_int, x_frac, wd)[:, None, :, :]).sum(axis=2)
     scale = 255.0 if lf.dtype == np.uint8 else 1.0
     out = np.empty((len(slopes), h, wd * c), np.uint8 if to_uint8 else np.float32)
-    shift_sum_separable(np.ascontiguousarray(lf).reshape(u, v, h, wd * c), c, w, y_int, y_frac, x_int, x_frac,
+    shift_sum_separable(read_only(np.ascontiguousarray(lf).reshape(u, v, h, wd * c)), c, w, y_int, y_frac, x_int, x_frac,
                         col_cover.astype(np.float32), scale, to_uint8, min(_BANDS, h), out)
     return out.reshape(len(slopes), h, wd, c)
 

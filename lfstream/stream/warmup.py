@@ -14,26 +14,53 @@ import numpy as np
 
 from lfstream.stream.config import StreamConfig
 
-#: The light field the warm-up runs: 3 x 3 views of 24 x 32 pixels, smooth values.
+#: The light field the warm-up runs: 3 x 3 views of 24 x 32 pixels (:func:`warmup_lf`).
 WARMUP_SHAPE = (3, 3, 24, 32, 3)
+
+
+def warmup_lf(read_only: bool = False) -> np.ndarray:
+    """The warm-up's light field: a texture seen with one pixel of parallax per view step
+    and a brightness that differs between views, so that the encoder sends a hint and gain
+    maps and the decoder's occlusion-aware warp runs with both (identical views would leave
+    the warp, its splat test and the gains' kernels unloaded: a flat hint decodes by copies).
+
+    numba compiles an array argument's read-only flag into the signature: a read-only frame
+    (the built-in clip, memory-mapped) and a writable one load different kernels, so
+    ``read_only`` gives the frame as a read-only array.
+
+    Shape:
+        - output: ``WARMUP_SHAPE`` uint8
+    """
+    u, v, h, w, c = WARMUP_SHAPE
+    yy, xx = np.mgrid[0:h + u, 0:w + v]
+    texture = 128 + 60 * np.sin(xx * 0.9) * np.cos(yy * 0.7) + 40 * ((xx // 5 + yy // 4) % 2)
+    lf = np.empty(WARMUP_SHAPE, np.uint8)
+    for a in range(u):
+        for b in range(v):
+            gain = 1.0 - 0.08 * (abs(a - u // 2) + abs(b - v // 2))  # vignetting: darker away from the centre
+            view = texture[a:a + h, b:b + w] * gain
+            lf[a, b] = np.clip(view, 0, 255).astype(np.uint8)[..., None]
+    lf.flags.writeable = not read_only
+    return lf
 
 
 def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     """Runs the encoder, decoder, focal stack and metrics of ``config`` once on a tiny light
-    field, so that their kernels are loaded (networks are not run: they load on their own),
-    and imports the sink's video library when the stream writes videos.
-    ``decode=False`` (a stream that ends at the transport) stops after the encoder; a stream
-    that starts at the transport still encodes the tiny frame, to have a packet to decode."""
-    u, v, h, w, c = WARMUP_SHAPE
-    yy, xx = np.mgrid[0:h, 0:w]
-    ramp = ((yy * 5 + xx * 3) % 256).astype(np.uint8)
-    lf = np.ascontiguousarray(np.broadcast_to(ramp[None, None, :, :, None], (u, v, h, w, c)))
+    field (:func:`warmup_lf`), so that their kernels are loaded (networks are not run: they
+    load on their own), and imports the sink's video library when the stream writes videos.
+    The kernels that read the source's frames are warmed for read-only frames (the built-in
+    clip) and writable ones (files, videos). ``decode=False`` (a stream that ends at the
+    transport) stops after the encoder; a stream that starts at the transport still encodes
+    the tiny frame, to have a packet to decode."""
+    u, v, h, w, _ = WARMUP_SHAPE
     if any(kind in config.save for kind in ("mp4", "mp4-lossless", "sweep", "lf")):
         import av  # noqa: F401 - the sink's video library: ~0.1 s to import, paid here once
     from lfstream.codec.decoder import Decoder
 
-    encoder = config.encoder()
-    packet = encoder.encode_frame(lf, 0, 0)
+    frames = (warmup_lf(read_only=True), warmup_lf())
+    for lf in frames:
+        encoder = config.encoder()
+        packet = encoder.encode_frame(lf, 0, 0)
     if not decode:
         return
     header = encoder.header((u, v), (h, w), config.fps)
@@ -45,9 +72,12 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     if config.refocus in ("auto", "sas"):
         focal_stack(decoded.lf, slopes=[-0.5, 0.0, 0.5])
     if config.metrics:
-        mpsnr(lf, decoded.lf)
-        if config.mssim_every:
-            mssim(lf, decoded.lf)
+        for lf in frames:  # the metrics compare the source's frames with the decoded ones
+            mpsnr(lf, decoded.lf)
+            if config.mssim_every:
+                mssim(lf, decoded.lf)
+            if config.refocus in ("auto", "sas"):
+                focal_stack(lf, slopes=[-0.5, 0.0, 0.5])  # the original's stack, for the stack PSNR
 
 
-__all__ = ["WARMUP_SHAPE", "warm_kernels"]
+__all__ = ["WARMUP_SHAPE", "warmup_lf", "warm_kernels"]

@@ -315,3 +315,46 @@ def test_the_stream_codes_the_views_where_warping_cannot_predict_them(unpredicta
     coding = summary["coding"]
     assert coding["preset"] == "balanced" and coding["residual_mode"] == "views" and coding["depth_hint"]
     assert coding["prediction_db"] < 22.0 and summary["mpsnr"] > 30.0, summary["mpsnr"]
+
+
+@pytest.mark.parametrize("read_only", [True, False])
+def test_warm_up_loads_every_kernel_the_stream_calls(monkeypatch, read_only):
+    """The warm-up (excluded from frames/s) must call each numba kernel with the argument
+    types the stream then uses: numba compiles one machine-code version per signature, and
+    a signature first met in the timed run is loaded there (or, on a fresh install,
+    compiled: seconds). Read-only frames (the built-in clip, memory-mapped) and writable ones
+    (files) alike. Every kernel call is recorded with its numba types, during the warm-up and
+    after it; the run may use no type tuple the warm-up did not."""
+    import importlib
+
+    import numba
+
+    import lfstream.stream.warmup as warmup
+
+    calls: list[tuple[str, tuple]] = []
+    for name in ("lfstream._kernels", "lfstream.codec._kernels", "lfstream.refocus._kernels"):
+        module = importlib.import_module(name)
+        for attr, fn in list(vars(module).items()):
+            if isinstance(fn, numba.core.registry.CPUDispatcher):
+                def spy(*args, _fn=fn, _name=f"{name}.{attr}"):
+                    calls.append((_name, tuple(numba.typeof(a) for a in args)))
+                    return _fn(*args)
+                monkeypatch.setattr(module, attr, spy)
+    warmed: set = set()
+    real_warm = warmup.warm_kernels
+
+    def warm(*args, **kwargs):
+        real_warm(*args, **kwargs)
+        warmed.update(calls)
+        calls.clear()
+
+    monkeypatch.setattr(warmup, "warm_kernels", warm)
+    frames = list(synthetic_source(frames=2, views=7, size=(64, 96), seed=4, cache=False))
+    for f in frames:
+        f.flags.writeable = not read_only
+    config = StreamConfig(refocus="sas", mssim_every=1, save=())
+    summary = Pipeline(iter(frames), config, None).run()
+    assert summary["frames"] == 2 and summary["coding"]["prediction_db"] is not None  # the default's check ran
+    assert warmed and calls  # both phases called kernels (the spies are in place)
+    missed = sorted({name for name, types in calls if (name, types) not in warmed})
+    assert not missed, f"kernels called with types the warm-up did not load: {missed}"
