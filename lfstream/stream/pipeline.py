@@ -58,6 +58,8 @@ from lfstream.stream.stages import (
 )
 from lfstream.stream.transport import FileChannel, InprocChannel, LazyTcpSender, Receiver, Sender, TcpReceiver
 
+#: The status line while the kernels load (:mod:`lfstream.stream.warmup`), before the first frame.
+WARMUP_STATUS = "warming up: loading the compiled kernels (the first run after an install compiles them, about a minute)"
 STAGE_NAMES = ("producer", "encoder", "decoder", "refocus", "sink", "metrics")
 #: After a stop (Ctrl-C), how long the pipeline waits for its stages to finish their item.
 STOP_GRACE_S = 10.0
@@ -135,6 +137,8 @@ class Pipeline:
         from lfstream.stream.warmup import warm_kernels
 
         t_warm = time.perf_counter()
+        if self.progress is not None:  # silent otherwise: a fresh install compiles here for most of a minute
+            self.progress(WARMUP_STATUS)
         try:
             warm_kernels(cfg, decode=self.sender is None)
         except Exception:  # noqa: BLE001 - the warm-up only loads kernels: whatever failed here
@@ -228,4 +232,4 @@ class Pipeline:
         return " | ".join(parts)
 
 
-__all__ = ["Pipeline", "PipelineError", "STAGE_NAMES"]
+__all__ = ["Pipeline", "PipelineError", "STAGE_NAMES", "WARMUP_STATUS"]

@@ -20,6 +20,7 @@ from lfstream.errors import LFStreamError
 from lfstream.io import iter_video_frames
 from lfstream.io._fs import prepare_output_dir
 from lfstream.stream import Pipeline, PipelineError, StreamConfig, synthetic_source
+from lfstream.stream.pipeline import WARMUP_STATUS
 from lfstream.stream.transport import TAG_END, TAG_HEADER, TAG_PACKET, TcpReceiver
 
 SMALL = dict(frames=4, views=5, size=(48, 64))
@@ -259,6 +260,7 @@ def test_progress_line_shows_frames_rate_and_eta(tmp_path):
     pipe = Pipeline(small_source(frames=4), StreamConfig(refocus="sas", metrics=False, save=()), None,
                     progress=lines.append, total_frames=4)
     pipe.run()
+    assert lines and lines[0] == WARMUP_STATUS  # said before the warm-up, which is silent otherwise
     line = pipe.status_line(2.0)
     assert line.startswith("frame 4/4 | 2.0 frames/s | ETA 0 s"), line
     pipe.total_frames = None
