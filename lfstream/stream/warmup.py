@@ -48,8 +48,10 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     """Runs the encoder, decoder, focal stack and metrics of ``config`` once on a tiny light
     field (:func:`warmup_lf`), so that their kernels are loaded (networks are not run: they
     load on their own), and imports the sink's video library when the stream writes videos.
-    The kernels that read the source's frames are warmed for read-only frames (the built-in
-    clip) and writable ones (files, videos). ``decode=False`` (a stream that ends at the
+    The kernels that read the source's frames are run on read-only frames (the built-in
+    clip) and writable ones (files, videos): the kernels take their inputs read-only
+    (:func:`lfstream.lightfield.read_only`), and running both keeps a kernel added without
+    that from compiling in the timed run. ``decode=False`` (a stream that ends at the
     transport) stops after the encoder; a stream that starts at the transport still encodes
     the tiny frame, to have a packet to decode."""
     u, v, h, w, _ = WARMUP_SHAPE
