@@ -18,20 +18,16 @@ from lfstream.stream.config import StreamConfig
 WARMUP_SHAPE = (3, 3, 24, 32, 3)
 
 
-def warmup_lf(read_only: bool = False) -> np.ndarray:
+def warmup_lf() -> np.ndarray:
     """The warm-up's light field: a texture seen with one pixel of parallax per view step
     and a brightness that differs between views, so that the encoder sends a hint and gain
     maps and the decoder's occlusion-aware warp runs with both (identical views would leave
     the warp, its splat test and the gains' kernels unloaded: a flat hint decodes by copies).
 
-    numba compiles an array argument's read-only flag into the signature: a read-only frame
-    (the built-in clip, memory-mapped) and a writable one load different kernels, so
-    ``read_only`` gives the frame as a read-only array.
-
     Shape:
         - output: ``WARMUP_SHAPE`` uint8
     """
-    u, v, h, w, c = WARMUP_SHAPE
+    u, v, h, w, _ = WARMUP_SHAPE
     yy, xx = np.mgrid[0:h + u, 0:w + v]
     texture = 128 + 60 * np.sin(xx * 0.9) * np.cos(yy * 0.7) + 40 * ((xx // 5 + yy // 4) % 2)
     lf = np.empty(WARMUP_SHAPE, np.uint8)
@@ -40,7 +36,6 @@ def warmup_lf(read_only: bool = False) -> np.ndarray:
             gain = 1.0 - 0.08 * (abs(a - u // 2) + abs(b - v // 2))  # vignetting: darker away from the centre
             view = texture[a:a + h, b:b + w] * gain
             lf[a, b] = np.clip(view, 0, 255).astype(np.uint8)[..., None]
-    lf.flags.writeable = not read_only
     return lf
 
 
@@ -48,10 +43,10 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     """Runs the encoder, decoder, focal stack and metrics of ``config`` once on a tiny light
     field (:func:`warmup_lf`), so that their kernels are loaded (networks are not run: they
     load on their own), and imports the sink's video library when the stream writes videos.
-    The kernels that read the source's frames are run on read-only frames (the built-in
-    clip) and writable ones (files, videos): the kernels take their inputs read-only
-    (:func:`lfstream.lightfield.read_only`), and running both keeps a kernel added without
-    that from compiling in the timed run. ``decode=False`` (a stream that ends at the
+    One frame serves read-only sources (the built-in clip) and writable ones (files,
+    videos) alike: the kernels take their inputs read-only
+    (:func:`lfstream.lightfield.read_only`; tests/stream checks both kinds of source).
+    ``decode=False`` (a stream that ends at the
     transport) stops after the encoder; a stream that starts at the transport still encodes
     the tiny frame, to have a packet to decode."""
     u, v, h, w, _ = WARMUP_SHAPE
@@ -59,10 +54,9 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
         import av  # noqa: F401 - the sink's video library: ~0.1 s to import, paid here once
     from lfstream.codec.decoder import Decoder
 
-    frames = (warmup_lf(read_only=True), warmup_lf())
-    for lf in frames:
-        encoder = config.encoder()
-        packet = encoder.encode_frame(lf, 0, 0)
+    lf = warmup_lf()
+    encoder = config.encoder()
+    packet = encoder.encode_frame(lf, 0, 0)
     if not decode:
         return
     header = encoder.header((u, v), (h, w), config.fps)
@@ -74,12 +68,9 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     if config.refocus in ("auto", "sas"):
         focal_stack(decoded.lf, slopes=[-0.5, 0.0, 0.5])
     if config.metrics:
-        for lf in frames:  # the metrics compare the source's frames with the decoded ones
-            mpsnr(lf, decoded.lf)
-            if config.mssim_every:
-                mssim(lf, decoded.lf)
-            if config.refocus in ("auto", "sas"):
-                focal_stack(lf, slopes=[-0.5, 0.0, 0.5])  # the original's stack, for the stack PSNR
+        mpsnr(lf, decoded.lf)
+        if config.mssim_every:
+            mssim(lf, decoded.lf)
 
 
 __all__ = ["WARMUP_SHAPE", "warmup_lf", "warm_kernels"]
