@@ -364,7 +364,7 @@ def encode(
     (:func:`lfstream.codec.rate.default_preset`), and the views coded as one AV1 sequence
     keyed by the centre view where the first frame shows that warping cannot predict them; with
     ``hint_options`` not given, the hint at 1/8 of the view instead of 1/4 where the first
-    frame shows it predicts the views as well (:data:`lfstream.codec.rate.HINT_COARSEN_MAX_LOSS_DB`). A named
+    frame shows it predicts the views as well for the bytes it saves (:func:`lfstream.codec.rate.coarsening_allowance`). A named
     preset is used as it is. ``residual``: quality 1..100 of the residual layer (:mod:`lfstream.codec.residual`),
     ``None`` (the default) for none; ``residual_mode``: what it codes (``prediction`` or
     ``views``, :attr:`Encoder.residual_mode`). ``post_filter``: name the decoder's JPEG

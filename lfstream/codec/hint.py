@@ -693,6 +693,11 @@ def _full_payload(qh: QuantisedHint) -> bytes:
     return _pack(KIND_FULL, qh, 0, _coded_body(qh.q), CODER_CONTEXT)
 
 
+def key_payload(qh: QuantisedHint) -> bytes:
+    """The payload that sends ``qh`` whole (a key hint: no reference to another frame)."""
+    return _full_payload(qh)
+
+
 def encode_hint(disparity: np.ndarray | HintMap, options: HintOptions = HintOptions()) -> bytes:
     """A self-contained (``full``) hint payload. A full-resolution ``(H, W)`` map is first
     reduced to the hint grid (area average by ``options.hint_scale``)."""
@@ -939,4 +944,4 @@ def disparity_errors(estimate: np.ndarray, truth: np.ndarray, border: int = 15) 
 __all__ = ["HintReferenceError", "HintOptions", "HintMap", "HintTracker", "HintDecoder", "QuantisedHint", "sweep_views",
            "estimate_hint_map", "estimate_disparity",
            "estimate_view_axes", "is_standard", "GEOMETRY_MODES", "encode_hint", "decode_hint", "disparity_errors", "scene_range",
-           "quantise", "level_step", "sweeps_on_device"]
+           "quantise", "level_step", "sweeps_on_device", "key_payload"]

@@ -40,7 +40,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_header, pack_packet
-from lfstream.codec.hint import HintOptions
+from lfstream.codec.hint import HintOptions, key_payload
 from lfstream.codec.intra import CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.residual import VIEW_MODES
@@ -80,6 +80,16 @@ PREDICTION_CHECK_MIN_CELLS = 16
 #: bits; lytro_bikes' thin structures lose 0.43 dB at equal bits. The check's loss: bikes
 #: -0.38 dB, the other five -0.08...+0.04.
 HINT_COARSEN_MAX_LOSS_DB = 0.2
+#: ... and only where the bytes it saves are worth more than the check's loss: at most this
+#: many dB per percent of frame 0's bytes saved (log ratio). What a percent of bytes buys
+#: when the centre view's quality spends it, measured on the decoded light field at quality
+#: 40-60 (hint at 1/4): 0.013-0.068 dB on nine scenes (the synthetic clip, seahorse, cotton,
+#: lytro_bikes, lytro_translucent, four synthetic 256x320 scenes), median 0.03. Without
+#: this, scenes whose hint is a small share of the frame traded real quality for almost no
+#: bytes (synthetic seeds 5, 6, 10 at 256x320: -0.24 / -0.62 / -0.14 dB of MPSNR for 0.9 /
+#: 1.3 / 1.3 % fewer bytes; the check's loss there 0.08-0.10 dB); on the shared samples the
+#: choice is unchanged.
+HINT_COARSEN_DB_PER_PERCENT = 0.03
 #: The default's centre coding by the number of views: (most views, preset). With few views the
 #: centre view is a large share of the stream, and JPEG's intra coding loses to HEVC's. Measured
 #: at q50 against x265 medium at the same size (MPSNR / MSSIM differences), centre crops of the
@@ -257,26 +267,38 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
     coarse_check = coarse_gains = None
     if coarse is not None and min(frame.shape[2:4]) // coarse.scale >= PREDICTION_CHECK_MIN_CELLS:
         # the hint at half the resolution, judged on the same luma: sent where it predicts
-        # the ring as well (HINT_COARSEN_MAX_LOSS_DB); measured beside the full hint's check
-        # (its result is used only where that one passes)
+        # the ring as well, for the bytes it saves (coarsening_allowance); measured beside
+        # the full hint's check (its result is used only where that one passes)
         from lfstream.codec.watchdog import in_background
 
-        coarse_check = in_background(lambda: prediction_psnr(frame8, coarse, enc.last_gains, present,
-                                                             enc.last_ring_luma, grid_scale=enc.last_hint.scale))
+        coarse_check = in_background(lambda: (prediction_psnr(frame8, coarse, enc.last_gains, present,
+                                                              enc.last_ring_luma, grid_scale=enc.last_hint.scale),
+                                              len(key_payload(coarse))))
         if enc.last_gains is not None:  # the gains a coarser hint would send, measured meanwhile too
             coarse_gains = in_background(lambda: measure_gains(frame8, enc.gain_grid, present=present,
                                                                disparity=coarse.values(), axes=coarse.axes))
     db = prediction_psnr(frame8, enc.last_hint, enc.last_gains, present, enc.last_ring_luma)
-    db_coarse = None if coarse_check is None else coarse_check.result()
+    db_coarse, coarse_bytes = (None, 0) if coarse_check is None else coarse_check.result()
     if db >= PREDICTION_FLOOR_DB:
         if db_coarse is not None:
-            if db_coarse >= db - HINT_COARSEN_MAX_LOSS_DB:
+            if db - db_coarse <= coarsening_allowance(first, coarse_bytes):
                 gains = None if coarse_gains is None else coarse_gains.result()
                 return DefaultChoice(enc, enc.coarsen_first_hint(frame8, first, present, gains), db_coarse)
         return DefaultChoice(enc, first, db)
     views = Encoder(quality=quality, depth_hint=views_hint, hint_options=opts, gain_grid=gain_grid, preset="balanced",
                     residual=quality, residual_mode="views", post_filter=post_filter, device=device)
     return DefaultChoice(views, None, db)
+
+
+def coarsening_allowance(first: Packet, coarse_hint_bytes: int) -> float:
+    """How many dB of :func:`prediction_psnr` the default may lose by sending frame 0's hint
+    at twice the scale (a payload of ``coarse_hint_bytes`` instead of ``first.hint``): the
+    lesser of :data:`HINT_COARSEN_MAX_LOSS_DB` and :data:`HINT_COARSEN_DB_PER_PERCENT` per
+    percent of the packet's bytes saved (negative where the coarser hint is larger)."""
+    total = len(first.image) + len(first.hint) + len(first.gain) + len(first.residual)
+    coarse = total - len(first.hint) + int(coarse_hint_bytes)
+    saved_percent = 100.0 * float(np.log(max(total, 1) / max(coarse, 1)))
+    return min(HINT_COARSEN_MAX_LOSS_DB, HINT_COARSEN_DB_PER_PERCENT * saved_percent)
 
 
 def _stream_bytes(header: StreamHeader, packets) -> int:
@@ -668,6 +690,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
 __all__ = ["RATE_TOLERANCE", "SEARCHES", "QUICK_MAX_CENTRE_QUALITY", "QUICK_HINT_SHARE", "PROBE_NEAR",
            "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "FOLLOW_MAX_STEP",
            "FOLLOW_DEADBAND", "FOLLOW_STEP_GROWTH", "PREDICTION_FLOOR_DB", "PREDICTION_CHECK_MIN_CELLS",
-           "HINT_COARSEN_MAX_LOSS_DB", "DEFAULT_PRESET_BY_VIEWS", "default_preset",
+           "HINT_COARSEN_MAX_LOSS_DB", "HINT_COARSEN_DB_PER_PERCENT", "coarsening_allowance",
+           "DEFAULT_PRESET_BY_VIEWS", "default_preset",
            "RateChoice", "DefaultChoice",
            "choose_configuration", "choose_default", "uses_default_choice", "follow_rate", "prediction_psnr"]
