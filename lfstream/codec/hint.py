@@ -321,8 +321,10 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int) ->
     of a pixel are one vector ``g = (A @ steps[j])_j`` times a per-pixel scalar, so ``g``
     is the leading eigenvector of the flows' second moments (textured pixels, outliers
     dropped twice), and ``A`` its least-squares fit. Normalised so that a step along ``v``
-    moves a point by ``-d`` along ``x`` as in the convention (``A[1, 1] = 1``; ``A[0, 0] = 1``
-    where the grid has one column).
+    moves a point by ``-d`` along the image axis it mostly moves along: ``x`` as in the
+    convention (``A[1, 1] = 1``), or ``y`` for a grid stored with its view axes swapped or
+    turned a quarter (``A[0, 1] = 1``, e.g. ``(V, U)`` order: ``A`` close to ``[[0, 1], [1,
+    0]]``); the same with column 0 where the grid has one column.
 
     Args:
         images: ``(1 + J, h, w)`` luma at ``1 / scale``; images[0] the centre view.
@@ -366,7 +368,8 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int) ->
         f, weight = f[:, keep], weight[keep]
     a = np.linalg.lstsq(k, g, rcond=None)[0].reshape(2, 2)
     has_u, has_v = bool(np.any(steps[:, 0])), bool(np.any(steps[:, 1]))
-    ref = a[1, 1] if has_v else a[0, 0]
+    col = 1 if has_v else 0
+    ref = a[int(np.argmax(np.abs(a[:, col]))), col]  # [1, 1] unless the grid is transposed or turned
     if abs(ref) < 0.1 * (np.abs(a).max() + 1e-12):  # the v axis barely moves along x: not a light field
         return identity, False
     a = a / ref
