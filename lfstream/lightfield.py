@@ -115,6 +115,54 @@ def view_offsets(views: tuple[int, int], axes: np.ndarray | None = None) -> np.n
     return steps.astype(np.float32)
 
 
+def canonical_views(lf: np.ndarray, axes: np.ndarray | None,
+                    present: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The light field's views reordered so that its grid follows the convention (``A = I``,
+    :func:`view_offsets`) as far as an order of views can: swapped where a step along ``u``
+    moves points along ``x`` (a grid stored ``(V, U)`` or turned a quarter), then reversed
+    along each axis whose steps move points the opposite way (rows or columns of views
+    flipped). What is left of ``A`` after that (unequal baselines, a slight turn) stays.
+    Refocusing the result with the convention's shifts focuses at the disparity ``d`` the
+    codec's hint measures on ``lf`` with ``axes``; its centre view is ``lf``'s.
+
+    A reversed axis of even length loses its last view after reversing (the farthest on the
+    side with one view more): the centre view then stays at index ``n // 2``. Views, not
+    pixels: the result is a view of ``lf`` (no copy).
+
+    Args:
+        lf: ``(U, V, H, W, C)`` or ``(T, U, V, H, W, C)``.
+        axes: the ``(2, 2)`` view axes (``None``: the convention, ``lf`` returned as it is).
+        present: ``(U, V)`` mask of views present, reordered the same way.
+
+    Shape:
+        - output: ``(U', V', H, W, C)`` (``T`` first for a video), ``U'``, ``V'`` as described
+    """
+    if axes is None:
+        return lf, present
+    a = np.asarray(axes, np.float64)
+    if a.shape != (2, 2) or not np.all(np.isfinite(a)):
+        raise LFValueError(f"axes: expected a finite (2, 2) matrix, got shape {a.shape}")
+    lead = lf.ndim - 5
+    # which image axis each view axis mostly moves along (row 0: y, row 1: x)
+    u_along, v_along = int(np.argmax(np.abs(a[:, 0]))), int(np.argmax(np.abs(a[:, 1])))
+    if u_along == 1 and v_along == 0:  # swapped: the grid's rows step along x
+        order = list(range(lead)) + [lead + 1, lead] + list(range(lead + 2, lf.ndim))
+        lf = lf.transpose(order)
+        present = None if present is None else np.asarray(present).T
+        a = a[:, ::-1]
+    elif u_along == v_along:  # both axes along one image axis: no order of views fixes that
+        return lf, present
+    for axis in (0, 1):
+        if a[axis, axis] >= 0:
+            continue
+        n = lf.shape[lead + axis]
+        reverse = slice(None, None, -1) if n % 2 else slice(n - 1, 0, -1)
+        lf = lf[(slice(None),) * (lead + axis) + (reverse,)]
+        if present is not None:
+            present = np.asarray(present)[(slice(None),) * axis + (reverse,)]
+    return lf, present
+
+
 def lf_dims(lf: ArrayT) -> tuple[int, int, int, int, int]:
     """Returns ``(U, V, H, W, C)`` of a frame or video."""
     shape = check_lf(lf)
@@ -395,6 +443,7 @@ def check_finite(x: ArrayT, name: str = "lf") -> None:
 
 __all__ = [
     "view_offsets",
+    "canonical_views",
     "to_network_input",
     "MAX_VIEWS_PER_AXIS",
     "MAX_VIEW_SIDE",

@@ -124,3 +124,38 @@ def test_read_only_is_a_view_that_leaves_the_array_writable():
     a[0, 0] = 5.0  # the caller's array is untouched and still its to write
     assert ro[0, 0] == 5.0
     assert not read_only(ro).flags.writeable  # idempotent on read-only input
+
+
+@pytest.mark.parametrize("views", [(7, 7), (8, 6), (5, 9)])
+@pytest.mark.parametrize("axes", [np.eye(2), np.diag([-1.0, 1.0]), np.diag([1.0, -1.0]), -np.eye(2),
+                                  np.array([[0.0, 1.0], [1.0, 0.0]]), np.array([[0.0, -1.0], [1.0, 0.0]]),
+                                  np.array([[0.0, 1.0], [-1.0, 0.0]])])
+def test_canonical_views_reorder_a_flipped_or_swapped_grid_to_the_convention(views, axes):
+    """Each view of a grid with ``axes`` holds its own displacement (view_offsets); reordered,
+    every view holds the convention's displacement for its new index, the centre view stays
+    the centre (an even axis that is reversed loses one end view), and nothing is copied."""
+    from lfstream.lightfield import canonical_views, view_offsets
+
+    shift = view_offsets(views, axes)
+    lf = np.zeros((*views, 1, 1, 3), np.float32)
+    lf[..., 0, 0, :2] = shift
+    present = np.ones(views, bool)
+    present[0, 0] = False
+    out, mask = canonical_views(lf, axes, present)
+    u, v = out.shape[:2]
+    assert np.array_equal(out[:, :, 0, 0, :2], view_offsets((u, v)))
+    assert out.base is not None or out is lf  # a view of the input, no copy
+    assert mask.shape == (u, v) and (~mask).sum() <= 1
+    a, b = views
+    shorter = (a - (a % 2 == 0), b - (b % 2 == 0))  # a reversed even axis loses one end view
+    assert sorted((u, v)) in ([*sorted((a, b))], sorted((shorter[0], b)), sorted((a, shorter[1])), sorted(shorter))
+
+
+def test_canonical_views_leave_the_convention_and_no_axes_as_they_are():
+    from lfstream.lightfield import canonical_views
+
+    lf = np.zeros((2, 5, 5, 4, 4, 3), np.uint8)  # a video: the view axes are the second and third
+    assert canonical_views(lf, None)[0] is lf and canonical_views(lf, np.eye(2))[0].shape == lf.shape
+    assert canonical_views(lf, np.diag([-1.0, 1.0]))[0].shape == lf.shape
+    with pytest.raises(LFValueError, match="axes"):
+        canonical_views(lf, np.ones(3))

@@ -130,13 +130,15 @@ class Refocuser:
         return "|".join(str(x) for x in (self.config.device, lf.shape, np.round(self.slopes, 6).tolist(), __version__,
                                          torch.__version__, torch.get_num_threads(), entry.get("sha256")))
 
-    def render(self, f: DecodedFrame) -> tuple[np.ndarray | None, list[int]]:
-        """The focal stack ``(K, H, W, 3)`` uint8 of a decoded frame and the planes rendered cheaply."""
+    def render(self, f: DecodedFrame, lf: np.ndarray | None = None) -> tuple[np.ndarray | None, list[int]]:
+        """The focal stack ``(K, H, W, 3)`` uint8 of a decoded frame and the planes rendered
+        cheaply; ``lf``: the frame's views to refocus where not ``f.lf`` (reordered to the
+        convention's grid, :func:`lfstream.lightfield.canonical_views`)."""
         from lfstream.refocus import focal_stack
 
         if self.method == "none":
             return None, []
-        lf = f.lf
+        lf = f.lf if lf is None else lf
         if self.method in ("refnet", "fourier") or not self.config.skip_planes:
             extra = {"device": self.config.device} if self.method == "refnet" else {}
             return focal_stack(lf, slopes=self.slopes, method=self.method, **extra), []

@@ -22,6 +22,7 @@ from lfstream.codec.decoder import DecodedFrame, Decoder
 from lfstream.codec.encoder import Encoder
 from lfstream.codec.rate import choose_configuration, choose_default, uses_default_choice
 from lfstream.errors import LFStreamError, LFValueError
+from lfstream.lightfield import canonical_views
 from lfstream.stream.config import StreamConfig
 from lfstream.stream.frames import SourceFrame, StackFrame
 from lfstream.stream.refocuser import Refocuser
@@ -338,13 +339,16 @@ class RefocusStage(ConsumerStage):
         self.refocuser: Refocuser | None = None
 
     def work(self, f: DecodedFrame) -> StackFrame:
+        # the convention's grid (a capture with flipped or swapped view axes, which the hint
+        # carries, reordered), so that the planes focus at the disparities they name
+        lf = canonical_views(f.lf, f.axes)[0]
         if self.refocuser is None:
-            self.refocuser = Refocuser(self.config, tuple(f.lf.shape[:2]))
+            self.refocuser = Refocuser(self.config, tuple(lf.shape[:2]))
             self.refocuser.fit_planes(f)
-            self.refocuser.choose(f.lf)
+            self.refocuser.choose(lf)
         else:
             self.refocuser.fit_planes(f)
-        stack, cheap = self.refocuser.render(f)
+        stack, cheap = self.refocuser.render(f, lf)
         return StackFrame(f.seq, f, stack, cheap, self.refocuser.slopes.copy())
 
 
@@ -401,7 +405,8 @@ class MetricsStage(ConsumerStage):
         if every and f.seq % every == 0 and min(ref.shape[2:4]) >= 11:
             q.mssim.append((f.seq, float(mssim(ref, rec, present=self.present))))
             if f.stack is not None:
-                truth = focal_stack(ref, slopes=f.slopes, present=self.present)
+                ref_views, present = canonical_views(ref, f.decoded.axes, self.present)  # as the refocus stage
+                truth = focal_stack(ref_views, slopes=f.slopes, present=present)
                 q.stack_psnr[f.seq] = float(np.mean(np.minimum(psnr(truth, f.stack), 100.0)))
         return f
 
