@@ -441,9 +441,29 @@ def check_finite(x: ArrayT, name: str = "lf") -> None:
         raise LFValueError(f"{name}: contains NaN or Inf values")
 
 
+#: How far outside ``[0, 1]`` a float light field may reach before the codec refuses it:
+#: less is resampling overshoot and is clipped; more is data in other units (8-bit values
+#: stored as float would otherwise code as a white frame).
+FLOAT_RANGE_SLACK = 1.0
+
+
+def check_unit_range(x: np.ndarray, name: str = "lf") -> None:
+    """Raises :class:`LFValueError` if a float array's values reach further outside ``[0, 1]``
+    than :data:`FLOAT_RANGE_SLACK` (integer arrays pass: their range is their dtype's)."""
+    a = np.asarray(x)
+    if not np.issubdtype(a.dtype, np.floating) or a.size == 0:
+        return
+    lo, hi = float(a.min()), float(a.max())
+    if lo < -FLOAT_RANGE_SLACK or hi > 1.0 + FLOAT_RANGE_SLACK:
+        raise LFValueError(f"{name}: float values span {lo:g} .. {hi:g}; expected uint8, or float in [0, 1] "
+                           "(8-bit values stored as float: divide by 255)")
+
+
 __all__ = [
     "view_offsets",
     "canonical_views",
+    "check_unit_range",
+    "FLOAT_RANGE_SLACK",
     "to_network_input",
     "MAX_VIEWS_PER_AXIS",
     "MAX_VIEW_SIDE",

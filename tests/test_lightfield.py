@@ -159,3 +159,15 @@ def test_canonical_views_leave_the_convention_and_no_axes_as_they_are():
     assert canonical_views(lf, np.diag([-1.0, 1.0]))[0].shape == lf.shape
     with pytest.raises(LFValueError, match="axes"):
         canonical_views(lf, np.ones(3))
+
+
+def test_check_unit_range_clips_overshoot_and_refuses_other_units():
+    from lfstream.lightfield import FLOAT_RANGE_SLACK, check_unit_range
+
+    check_unit_range(np.full((3, 3), 255, np.uint8))  # integers: their dtype's range
+    check_unit_range(np.array([-0.02, 0.5, 1.03], np.float32))  # resampling overshoot
+    check_unit_range(np.array([-FLOAT_RANGE_SLACK, 1.0 + FLOAT_RANGE_SLACK]))
+    check_unit_range(np.zeros((0, 3), np.float32))
+    for bad in (np.array([0.0, 255.0], np.float32), np.array([-1.5, 0.5])):
+        with pytest.raises(LFValueError, match=r"frame 3: float values span .* divide by 255"):
+            check_unit_range(bad, "frame 3")

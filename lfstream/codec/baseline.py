@@ -112,6 +112,11 @@ def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order
         raise LFValueError(f"x265 CRF mode needs views of at least {MIN_CRF_SIDE}x{MIN_CRF_SIDE}; "
                            "use constant QP for smaller views")
 
+    if spec.encoder == "libsvtav1":
+        from lfstream.codec.intra import quiet_svt_log
+
+        quiet_svt_log()
+
     def run() -> bytes:  # self-contained, so the watchdog can retry it on a fresh encoder
         buf = io.BytesIO()
         with av.open(buf, mode="w", format=spec.container) as container:

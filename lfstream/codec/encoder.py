@@ -28,7 +28,7 @@ from lfstream.codec.shading import GainTracker, measure_gains, shading_present
 from lfstream.codec.watchdog import in_background
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.io._fs import atomic_open
-from lfstream.lightfield import centre_view, check_finite, check_lf, to_uint8
+from lfstream.lightfield import centre_view, check_finite, check_lf, check_unit_range, to_uint8
 
 ENCODER_NAME = "lfstream-jpeg-centre"
 
@@ -198,6 +198,7 @@ class Encoder:
         if lf.shape[-1] != 3:
             raise LFValueError(f"frame {seq}: expected 3 colour channels, got {lf.shape[-1]}")
         check_finite(lf, f"frame {seq}")
+        check_unit_range(lf, f"frame {seq}")
         if self.codes_views and present is not None and not present.all():
             raise LFValueError(f"frame {seq}: residual_mode {self.residual_mode!r} codes every view and "
                                f"{int((~present).sum())} are missing; use the prediction mode, which reconstructs them")

@@ -14,6 +14,7 @@ the same bytes (SVT-AV1 at a fixed preset, checked by tests/codec/test_intra.py)
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -119,11 +120,19 @@ def av1_fits(size: tuple[int, int]) -> bool:
     return h + h % 2 >= AV1_MIN_SIZE and w + w % 2 >= AV1_MIN_SIZE
 
 
+def quiet_svt_log() -> None:
+    """SVT-AV1 prints its configuration to stderr, about twenty lines an encoder, at its
+    default log level; it reads ``SVT_LOG`` once, when its first encoder starts. Errors only
+    (level 1), unless the user set the variable."""
+    os.environ.setdefault("SVT_LOG", "1")
+
+
 def svtav1_encoder(size: tuple[int, int], quality: int, speed: int, gop: int | None = None):
     """An SVT-AV1 encoder context for even-sized 4:2:0 frames at ``quality`` (1..100, mapped
     by :func:`av1_crf`) and preset ``speed``; ``gop``: the key-frame interval, if set."""
     import av
 
+    quiet_svt_log()
     ctx = av.CodecContext.create("libsvtav1", "w")
     ctx.height, ctx.width = size
     ctx.pix_fmt = "yuv420p"
@@ -195,5 +204,5 @@ def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int 
 
 __all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "AV1_MIN_SIZE", "av1_fits",
            "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
-           "svtav1_encoder",
+           "svtav1_encoder", "quiet_svt_log",
            "encode_av1", "decode_av1", "encode_centre", "decode_centre"]

@@ -57,6 +57,23 @@ def test_bad_input_one_line(capsys, tmp_path, bad):
     assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+def test_a_float_light_field_in_8_bit_units_is_refused_in_one_line(capsys, tmp_path):
+    """A float light field with values 0..255 (uint8 data converted without scaling) would
+    code as a white frame: encode refuses it, naming the frame and the range, and writes
+    nothing; the same data in [0, 1] encodes."""
+    from lfstream.synth import synth_clip
+
+    lf = synth_clip(1, 3, (32, 40), seed=1).lf[0]
+    path = tmp_path / "lf255.npy"
+    np.save(path, lf.astype(np.float32))
+    out = tmp_path / "out.lfs"
+    code, _, err = run(capsys, "encode", path, "-o", out)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert "frame 0" in err and "float values span 0 .. 2" in err and "divide by 255" in err and not out.exists()
+    np.save(path, lf.astype(np.float32) / 255.0)
+    assert run(capsys, "encode", path, "-o", out)[0] == 0 and out.exists()
+
+
 def test_synth_then_info_then_refocus(capsys, tmp_path):
     clip = tmp_path / "clip.npz"
     code, _, _ = run(capsys, "synth", clip, "--frames", 2, "--views", 5, "--size", "32x40", "--seed", 3)

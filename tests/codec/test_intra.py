@@ -156,3 +156,22 @@ def test_views_too_small_for_av1_are_a_clear_error_and_the_default_still_codes_t
             lfstream.encode(lf, **kwargs)
     for data in (lfstream.encode(lf), lfstream.encode(lf, bpp=0.5)):
         assert lfstream.decode(data)[0].shape == lf.shape
+
+
+def test_svt_av1_prints_nothing_unless_asked():
+    """SVT-AV1 prints its configuration (~20 lines an encoder) at its default log level;
+    lfstream starts its encoders at errors only (SVT_LOG=1), unless the user set SVT_LOG.
+    Fresh processes: SVT reads the variable once, at its first encoder."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import numpy as np, lfstream\n"
+            "from lfstream.synth import synth_clip\n"
+            "lfstream.encode(synth_clip(1, 3, (64, 96), seed=3).lf[0], preset='balanced')\n")
+    env = {k: v for k, v in os.environ.items() if k != "SVT_LOG"}
+    quiet = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert quiet.returncode == 0 and "Svt[" not in quiet.stderr, quiet.stderr[-500:]
+    loud = subprocess.run([sys.executable, "-c", code], env={**env, "SVT_LOG": "3"}, capture_output=True, text=True,
+                          timeout=120)
+    assert loud.returncode == 0 and "Svt[info]" in loud.stderr  # the user's setting wins
