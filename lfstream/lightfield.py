@@ -126,8 +126,8 @@ def canonical_views(lf: np.ndarray, axes: np.ndarray | None,
     codec's hint measures on ``lf`` with ``axes``; its centre view is ``lf``'s.
 
     A reversed axis of even length loses its last view after reversing (the farthest on the
-    side with one view more): the centre view then stays at index ``n // 2``. Views, not
-    pixels: the result is a view of ``lf`` (no copy).
+    side with one view more): the centre view then stays at index ``n // 2``. The result is
+    a view of ``lf`` (no copy).
 
     Args:
         lf: ``(U, V, H, W, C)`` or ``(T, U, V, H, W, C)``.
