@@ -322,6 +322,24 @@ def test_a_grid_stored_with_its_view_axes_swapped_is_detected_and_warped(square_
     assert auto > standard + 4.0 and auto > plain - 0.2
 
 
+def test_vignetting_does_not_hide_a_flipped_grid():
+    """Outer views darkened unevenly (vignetting 0.3, noise) pulled the detection's flows so
+    far that this flipped grid was coded on the convention (measured 33.58 dB against 35.55
+    in its own order); the detection's flows now see luma divided by its local mean: 35.55."""
+    import lfstream
+    from lfstream.metrics import mpsnr
+
+    lf = synth_clip(1, 7, (192, 256), seed=1, noise=2.0, vignetting=0.3, motion=0, camera_pan=0).lf[0]
+    flipped = np.ascontiguousarray(lf[::-1])
+    axes = H.estimate_view_axes(flipped)
+    assert axes[0, 0] < -0.6 and abs(axes[1, 1] - 1.0) < 1e-6  # measured [[-0.822, -0.066], [0.083, 1]]
+    auto = mpsnr(flipped, lfstream.decode(lfstream.encode(flipped))[0])
+    standard = mpsnr(flipped, lfstream.decode(lfstream.encode(flipped, hint_options=H.HintOptions(geometry="standard")))[0])
+    own = mpsnr(lf, lfstream.decode(lfstream.encode(lf))[0])
+    assert auto > standard + 1.5 and auto > own - 0.2
+    assert H.is_standard(H.estimate_view_axes(lf))  # and the grid in its own order stays the convention
+
+
 @pytest.mark.parametrize("flip", [False, True])
 def test_sweeping_beside_the_axes_detection_gives_the_map_of_detecting_first(square_scene, flip):
     """estimate_hint_map sweeps on the convention while the axes are detected beside it, and
