@@ -11,6 +11,7 @@ import numpy as np
 from lfstream.cli._common import add_read_options, emit, float_in, load_from_args, parse_float_list
 from lfstream.errors import LFFileError, LFValueError
 from lfstream.io._fs import prepare_output_dir
+from lfstream.lightfield import canonical_views
 
 HELP = "render a focal stack (PNG per plane, MP4 and GIF focal sweep)"
 #: Methods of :func:`lfstream.refocus.focal_stack` (kept here so --help does not import torch).
@@ -31,6 +32,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fps", type=float_in(1e-3, 1000), default=8.0, help="frame rate of the focal sweep")
     p.add_argument("--no-sweep", action="store_true", help="skip the MP4/GIF focal sweep")
     p.add_argument("--no-viewer", action="store_true", help="do not write index.html (click-to-focus page)")
+    p.add_argument("--axes", choices=("auto", "standard"), default="auto",
+                   help="auto: detect a grid whose views run the other way or are stored (V, U), and refocus "
+                        "its views in the convention's order; standard: the order as stored")
     add_read_options(p)
     p.add_argument("--json", action="store_true")
 
@@ -53,10 +57,12 @@ def run(args: argparse.Namespace) -> int:
     if args.output.exists() and (not args.output.is_dir() or any(args.output.iterdir())):
         raise LFFileError(f"{args.output}: already exists and is not an empty folder")
     loaded = load_from_args(args)
+    axes = _view_axes(loaded) if args.axes == "auto" else None
+    lf, present = canonical_views(loaded.lf, axes, loaded.present)
     t0 = time.perf_counter()
     extra = {"device": args.device} if args.method == "refnet" else {}
-    stack = focal_stack(loaded.lf, slopes=slopes, method=args.method, aperture=args.aperture,
-                        aperture_shape=args.aperture_shape, present=loaded.present, **extra)
+    stack = focal_stack(np.ascontiguousarray(lf), slopes=slopes, method=args.method, aperture=args.aperture,
+                        aperture_shape=args.aperture_shape, present=present, **extra)
     render_s = time.perf_counter() - t0
     if stack.dtype != np.uint8:
         stack = np.clip(stack * 255.0 + 0.5, 0, 255).astype(np.uint8)
@@ -93,8 +99,22 @@ def run(args: argparse.Namespace) -> int:
                                    for t, f in enumerate(lf)])
         viewer = write_viewer(out, fps=args.fps if len(video) == 1 else (loaded.fps or 30.0))
     summary = {"input": str(args.input), "method": args.method, "frames": len(video), "planes": planes,
+               "view_axes": None if axes is None else [[round(float(x), 4) for x in row] for row in axes],
                "render_s": render_s, "output": str(out), "files": len(files),
                "viewer": str(viewer) if viewer is not None else None}
-    emit(args, summary, f"{len(slopes)} planes x {len(video)} frame(s) by {args.method} in {render_s:.3f} s -> {out}"
+    reordered = "" if axes is None else (" (views reordered to the convention: view axes "
+                                         f"{[[round(float(x), 2) for x in row] for row in axes]})")
+    emit(args, summary, f"{len(slopes)} planes x {len(video)} frame(s) by {args.method} in {render_s:.3f} s{reordered}"
+         f" -> {out}"
          + (f"\nopen {viewer.resolve().as_uri()} to click-to-focus" if viewer is not None else ""))
     return 0
+
+
+def _view_axes(loaded) -> np.ndarray | None:
+    """The view axes of the input's first frame (:func:`lfstream.codec.hint.estimate_view_axes`),
+    ``None`` where they are the convention."""
+    from lfstream.codec.hint import estimate_view_axes, is_standard
+
+    first = loaded.lf if loaded.lf.ndim == 5 else loaded.lf[0]
+    axes = estimate_view_axes(first, present=loaded.present)
+    return None if is_standard(axes) else axes

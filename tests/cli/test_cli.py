@@ -74,6 +74,31 @@ def test_a_float_light_field_in_8_bit_units_is_refused_in_one_line(capsys, tmp_p
     assert run(capsys, "encode", path, "-o", out)[0] == 0 and out.exists()
 
 
+def test_refocus_reorders_a_grid_whose_rows_of_views_run_the_other_way(capsys, tmp_path):
+    """A light field stored with its rows of views reversed: `refocus` detects the view axes
+    and renders the focal stack of the grid in the convention's order (the planes equal the
+    unflipped input's), and says so; `--axes standard` renders the order as stored."""
+    from lfstream.io import read_image
+    from lfstream.metrics import psnr
+    from lfstream.synth import synth_clip
+
+    lf = synth_clip(1, 7, (192, 256), seed=0).lf[0]
+    own, flipped = tmp_path / "own.npy", tmp_path / "flipped.npy"
+    np.save(own, lf)
+    np.save(flipped, np.ascontiguousarray(lf[::-1]))
+    planes = {}
+    for name, path, extra in (("own", own, ()), ("auto", flipped, ()), ("stored", flipped, ("--axes", "standard"))):
+        out = tmp_path / name
+        code, text, _ = run(capsys, "refocus", path, "-o", out, "--slopes=-1,0.5", "--no-sweep", "--no-viewer",
+                            "--json", *extra)
+        assert code == 0
+        summary = json.loads(text)
+        assert (summary["view_axes"] is None) == (name != "auto")
+        planes[name] = np.stack([read_image(out / f"plane_0{k}.png") for k in range(2)])
+    assert summary is not None and float(np.mean(psnr(planes["own"], planes["auto"]))) > 45.0
+    assert float(np.mean(psnr(planes["own"], planes["stored"]))) < 35.0
+
+
 def test_synth_then_info_then_refocus(capsys, tmp_path):
     clip = tmp_path / "clip.npz"
     code, _, _ = run(capsys, "synth", clip, "--frames", 2, "--views", 5, "--size", "32x40", "--seed", 3)
