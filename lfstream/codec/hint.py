@@ -385,7 +385,7 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int,
     has_u, has_v = bool(np.any(steps[:, 0])), bool(np.any(steps[:, 1]))
     col = 1 if has_v else 0
     ref = a[int(np.argmax(np.abs(a[:, col]))), col]  # [1, 1] unless the grid is transposed or turned
-    if abs(ref) < 0.1 * (np.abs(a).max() + 1e-12):  # the v axis barely moves along x: not a light field
+    if abs(ref) < 0.1 * (np.abs(a).max() + 1e-12):  # a v step barely moves points: not a light field
         return identity, False
     a = a / ref
     if not has_u:
