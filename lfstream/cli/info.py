@@ -49,10 +49,11 @@ def describe_stream(path: Path, frames: int) -> dict:
     """What an ``.lfs`` file's header says it carries: format version, the centre view's
     codec and preset, quality, depth hint, residual layer (quality and mode), file bytes and
     bits per pixel of the light field."""
-    from lfstream.codec.bitstream import CODEC_NAMES, read_header
+    from lfstream.codec.bitstream import CODEC_NAMES, read_header, read_packet
 
     with open(path, "rb") as fh:
         header = read_header(fh)
+        first = read_packet(fh, header) if header.has_hint else None
     u, v = header.views
     h, w = header.size
     size = path.stat().st_size
@@ -60,9 +61,21 @@ def describe_stream(path: Path, frames: int) -> dict:
     return {"version": header.version, "centre_codec": CODEC_NAMES[header.codec],
             "preset": header.meta.get("preset", "fast"), "quality": header.quality, "depth_hint": header.has_hint,
             "hint_scale": header.meta.get("hint", {}).get("hint_scale") if header.has_hint else None,
+            "view_axes": _view_axes(first, header.size),
             "residual": None if residual is None else residual.get("quality"),
             "residual_mode": None if residual is None else residual.get("mode", "prediction"),
             "file_bytes": size, "bpp": 8.0 * size / max(frames * u * v * h * w, 1)}
+
+
+def _view_axes(packet, size: tuple[int, int]) -> list[list[float]] | None:
+    """The view axes frame 0's hint carries (:func:`lfstream.codec.hint.is_standard` ones,
+    and streams without a hint: ``None``)."""
+    from lfstream.codec.hint import HintDecoder, is_standard
+
+    if packet is None or not packet.hint:
+        return None
+    axes = HintDecoder().parse(packet.hint, size, packet.seq).axes
+    return None if is_standard(axes) else [[round(float(x), 4) for x in row] for row in axes]
 
 
 def _text(info: dict) -> str:
@@ -86,6 +99,8 @@ def _text(info: dict) -> str:
         layers = coding_layers(s["depth_hint"], s["residual"], s["residual_mode"], s.get("hint_scale"))
         lines.append(f"  stream  .lfs version {s['version']}, {s['preset']} ({s['centre_codec']} centre) q{s['quality']}"
                      f"{layers}; {s['file_bytes']} bytes, {s['bpp']:.5f} bpp")
+        if s.get("view_axes"):
+            lines.append(f"  axes    the views move along {s['view_axes']} (rows dy, dx; the convention: identity)")
     return "\n".join(lines)
 
 

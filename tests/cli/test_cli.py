@@ -99,6 +99,22 @@ def test_refocus_reorders_a_grid_whose_rows_of_views_run_the_other_way(capsys, t
     assert float(np.mean(psnr(planes["own"], planes["stored"]))) < 35.0
 
 
+def test_info_of_a_stream_reports_the_view_axes_its_hint_carries(capsys, tmp_path):
+    import lfstream
+    from lfstream.synth import synth_clip
+
+    lf = synth_clip(1, 7, (256, 256), seed=0).lf[0]
+    for name, grid, flipped in (("own", lf, False), ("flipped", np.ascontiguousarray(lf[::-1]), True)):
+        path = tmp_path / f"{name}.lfs"
+        path.write_bytes(lfstream.encode(grid))
+        code, out, _ = run(capsys, "info", path, "--json")
+        axes = json.loads(out)["stream"]["view_axes"]
+        assert code == 0 and (axes is None) != flipped
+        if flipped:  # measured [[-1.027, 0.013], [-0.021, 1]]
+            assert np.abs(np.array(axes) - np.diag([-1.0, 1.0])).max() < 0.06
+            assert "axes    the views move along" in run(capsys, "info", path)[1]
+
+
 def test_synth_then_info_then_refocus(capsys, tmp_path):
     clip = tmp_path / "clip.npz"
     code, _, _ = run(capsys, "synth", clip, "--frames", 2, "--views", 5, "--size", "32x40", "--seed", 3)
@@ -378,7 +394,7 @@ def test_info_on_a_stream_says_what_it_carries(capsys, tmp_path):
     assert main(["info", str(tmp_path / "a.lfs"), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)["stream"]
     assert s == {"version": 1, "centre_codec": "jpeg", "preset": "fast", "quality": 40, "depth_hint": True,
-                 "hint_scale": 4, "residual": None, "residual_mode": None, "file_bytes": len(data),
+                 "hint_scale": 4, "view_axes": None, "residual": None, "residual_mode": None, "file_bytes": len(data),
                  "bpp": pytest.approx(8 * len(data) / (2 * 7 * 7 * 64 * 96))}
     (tmp_path / "b.lfs").write_bytes(lfstream.encode(lf, quality=40, preset="best", residual=30))
     assert main(["info", str(tmp_path / "b.lfs")]) == 0
