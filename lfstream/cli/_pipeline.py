@@ -126,7 +126,9 @@ def _text(summary: dict, out: Path | None) -> str:
                      + (f"; the prediction checked at {c['prediction_db']:.1f} dB" if c.get("prediction_db") is not None
                         else ""))
     if summary.get("refocus"):
-        lines.append(f"  refocus: {summary['refocus']['method']} ({summary['refocus']['why']})")
+        lines.append(f"  refocus: {summary['refocus']['method']} ({summary['refocus']['why']})"
+                     + (f"; the views reordered to the convention (view axes {summary['refocus']['view_axes']})"
+                        if summary["refocus"].get("view_axes") else ""))
     if out is not None:
         lines.append(f"  outputs in {out} (summary.json)")
     return "\n".join(lines)

@@ -206,7 +206,10 @@ class Pipeline:
             planes=refocuser.skips if refocuser is not None else PlaneSkipStats(enabled=cfg.skip_planes),
             receive=receive,
             transport="tcp" if self.sender is not None or self.receiver is not None else cfg.transport,
-            refocus={"method": refocuser.method, "why": refocuser.reason} if refocuser is not None else None,
+            refocus={"method": refocuser.method, "why": refocuser.reason,
+                     "view_axes": None if refocus.view_axes is None
+                     else [[round(float(x), 4) for x in row] for row in refocus.view_axes]}
+            if refocuser is not None else None,
             focal_planes=refocuser.planes() if refocuser is not None else [],
             plane_updates=refocuser.updates if refocuser is not None else [],
             hance={"mode": cfg.hance, "ran": bool(decoder is not None and decoder.decoder is not None

@@ -337,12 +337,14 @@ class RefocusStage(ConsumerStage):
         super().__init__(control, stats, q_in, q_out)
         self.config = config
         self.refocuser: Refocuser | None = None
+        self.view_axes: np.ndarray | None = None  # the first frame's, where its views were reordered
 
     def work(self, f: DecodedFrame) -> StackFrame:
         # the convention's grid (a capture with flipped or swapped view axes, which the hint
         # carries, reordered), so that the planes focus at the disparities they name
         lf = canonical_views(f.lf, f.axes)[0]
         if self.refocuser is None:
+            self.view_axes = None if lf is f.lf else f.axes
             self.refocuser = Refocuser(self.config, tuple(lf.shape[:2]))
             self.refocuser.fit_planes(f)
             self.refocuser.choose(lf)

@@ -386,6 +386,7 @@ def test_the_refocus_stage_focuses_a_grid_stored_off_the_convention_as_its_own_o
     assert decoded.axes is not None
     stage = RefocusStage(RunControl(), StageStats("refocus"), queue.Queue(), queue.Queue(), StreamConfig(refocus="sas"))
     out = stage.work(decoded)
+    assert stage.view_axes is not None  # reported in the summary's refocus record
     truth = focal_stack(clip, slopes=out.slopes)
     assert float(np.mean(psnr(truth, out.stack))) > 35.0
     assert float(np.mean(psnr(truth, focal_stack(np.ascontiguousarray(lf), slopes=out.slopes)))) < 34.0
