@@ -163,6 +163,12 @@ def canonical_views(lf: np.ndarray, axes: np.ndarray | None,
     return lf, present
 
 
+def axes_as_list(axes: np.ndarray | None, digits: int = 4) -> list[list[float]] | None:
+    """View axes as the JSON outputs report them (``view_axes``): rounded nested lists,
+    ``None`` for none."""
+    return None if axes is None else [[round(float(x), digits) for x in row] for row in np.asarray(axes)]
+
+
 def lf_dims(lf: ArrayT) -> tuple[int, int, int, int, int]:
     """Returns ``(U, V, H, W, C)`` of a frame or video."""
     shape = check_lf(lf)
@@ -462,6 +468,7 @@ def check_unit_range(x: np.ndarray, name: str = "lf") -> None:
 __all__ = [
     "view_offsets",
     "canonical_views",
+    "axes_as_list",
     "check_unit_range",
     "FLOAT_RANGE_SLACK",
     "to_network_input",

@@ -71,11 +71,12 @@ def _view_axes(packet, size: tuple[int, int]) -> list[list[float]] | None:
     """The view axes frame 0's hint carries (:func:`lfstream.codec.hint.is_standard` ones,
     and streams without a hint: ``None``)."""
     from lfstream.codec.hint import HintDecoder, is_standard
+    from lfstream.lightfield import axes_as_list
 
     if packet is None or not packet.hint:
         return None
     axes = HintDecoder().parse(packet.hint, size, packet.seq).axes
-    return None if is_standard(axes) else [[round(float(x), 4) for x in row] for row in axes]
+    return None if is_standard(axes) else axes_as_list(axes)
 
 
 def _text(info: dict) -> str:

@@ -11,7 +11,7 @@ import numpy as np
 from lfstream.cli._common import add_read_options, emit, float_in, load_from_args, parse_float_list
 from lfstream.errors import LFFileError, LFValueError
 from lfstream.io._fs import prepare_output_dir
-from lfstream.lightfield import canonical_views
+from lfstream.lightfield import axes_as_list, canonical_views
 
 HELP = "render a focal stack (PNG per plane, MP4 and GIF focal sweep)"
 #: Methods of :func:`lfstream.refocus.focal_stack` (kept here so --help does not import torch).
@@ -99,11 +99,10 @@ def run(args: argparse.Namespace) -> int:
                                    for t, f in enumerate(lf)])
         viewer = write_viewer(out, fps=args.fps if len(video) == 1 else (loaded.fps or 30.0))
     summary = {"input": str(args.input), "method": args.method, "frames": len(video), "planes": planes,
-               "view_axes": None if axes is None else [[round(float(x), 4) for x in row] for row in axes],
+               "view_axes": axes_as_list(axes),
                "render_s": render_s, "output": str(out), "files": len(files),
                "viewer": str(viewer) if viewer is not None else None}
-    reordered = "" if axes is None else (" (views reordered to the convention: view axes "
-                                         f"{[[round(float(x), 2) for x in row] for row in axes]})")
+    reordered = "" if axes is None else f" (views reordered to the convention: view axes {axes_as_list(axes, 2)})"
     emit(args, summary, f"{len(slopes)} planes x {len(video)} frame(s) by {args.method} in {render_s:.3f} s{reordered}"
          f" -> {out}"
          + (f"\nopen {viewer.resolve().as_uri()} to click-to-focus" if viewer is not None else ""))

@@ -708,13 +708,9 @@ def _decoded_body(body: bytes, shape: tuple[int, int], frame: int | None) -> np.
     return values[levels]
 
 
-def _full_payload(qh: QuantisedHint) -> bytes:
-    return _pack(KIND_FULL, qh, 0, _coded_body(qh.q), CODER_CONTEXT)
-
-
 def key_payload(qh: QuantisedHint) -> bytes:
     """The payload that sends ``qh`` whole (a key hint: no reference to another frame)."""
-    return _full_payload(qh)
+    return _pack(KIND_FULL, qh, 0, _coded_body(qh.q), CODER_CONTEXT)
 
 
 def encode_hint(disparity: np.ndarray | HintMap, options: HintOptions = HintOptions()) -> bytes:
@@ -730,7 +726,7 @@ def encode_hint(disparity: np.ndarray | HintMap, options: HintOptions = HintOpti
         hs, ws = max(1, d.shape[0] // s), max(1, d.shape[1] // s)
         small = cv2.resize(d[: hs * s, : ws * s], (ws, hs), interpolation=cv2.INTER_AREA)
         hm = HintMap(small, s, (float(d.min()), float(d.max())))
-    return _full_payload(quantise(hm, precision=options.precision))
+    return key_payload(quantise(hm, precision=options.precision))
 
 
 class HintTracker:
@@ -785,12 +781,12 @@ class HintTracker:
                 delta = (qh.q.astype(np.int16) - prev.q).astype(np.uint8)  # mod 256
                 payload = _pack(KIND_DELTA, qh, self._prev_seq,
                                 zstandard.ZstdCompressor(level=_ZSTD_LEVEL).compress(delta.tobytes()))
-                whole = _full_payload(qh)
+                whole = key_payload(qh)
                 if len(whole) < len(payload):  # a moving scene: the map itself is smaller
                     payload = whole
         if payload is None:
             qh = self._key_hint(hm)
-            payload = _full_payload(qh)
+            payload = key_payload(qh)
             self._since_key = 0
             self._search = hm.search
             self._key_map = hm
@@ -826,7 +822,7 @@ class HintTracker:
         self.options = replace(self.options, hint_scale=qh.scale)
         self._prev = qh
         self._key_map = None
-        return _full_payload(qh)
+        return key_payload(qh)
 
 
 class HintDecoder:

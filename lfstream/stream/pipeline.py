@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfstream.lightfield import axes_as_list
 from lfstream.stream.config import StreamConfig
 from lfstream.stream.report import PlaneSkipStats, QualityStats, RateStats, StageStats, StaticSkipStats, build_summary
 from lfstream.stream.sinks import Sink
@@ -206,9 +207,7 @@ class Pipeline:
             planes=refocuser.skips if refocuser is not None else PlaneSkipStats(enabled=cfg.skip_planes),
             receive=receive,
             transport="tcp" if self.sender is not None or self.receiver is not None else cfg.transport,
-            refocus={"method": refocuser.method, "why": refocuser.reason,
-                     "view_axes": None if refocus.view_axes is None
-                     else [[round(float(x), 4) for x in row] for row in refocus.view_axes]}
+            refocus={"method": refocuser.method, "why": refocuser.reason, "view_axes": axes_as_list(refocus.view_axes)}
             if refocuser is not None else None,
             focal_planes=refocuser.planes() if refocuser is not None else [],
             plane_updates=refocuser.updates if refocuser is not None else [],

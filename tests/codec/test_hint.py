@@ -467,7 +467,7 @@ def test_context_coded_maps_round_trip_exactly_at_every_level_step(rng, k):
         if 255 % k:
             q = np.where(rng.random(q.shape) < 0.05, 255, q)  # the quantiser's top value
         qh = H.QuantisedHint(q.astype(np.uint8), -1.0, 2.0, 4, None)
-        payload = H._full_payload(qh)
+        payload = H.key_payload(qh)
         assert payload[3] == H.CODER_CONTEXT and payload[0] == H.HINT_VERSION_CODED
         back = H._parse(payload, (4 * q.shape[0], 4 * q.shape[1]), 0, {})
         assert np.array_equal(back.q, qh.q) and (back.lo, back.hi, back.scale) == (-1.0, 2.0, 4)
@@ -484,7 +484,7 @@ def test_context_coder_beats_zstd_and_zstd_payloads_still_decode(rng):
     d = (d + rng.normal(0, 0.01, d.shape)).astype(np.float32)
     hm = H.HintMap(d, 4, (float(d.min()), float(d.max())), reach=3.0)
     qh = H.quantise(hm, precision=0.05)
-    coded, old = H._full_payload(qh), _zstd_payload(qh)
+    coded, old = H.key_payload(qh), _zstd_payload(qh)
     assert len(coded) < 0.85 * len(old), (len(coded), len(old))
     for payload in (coded, old):
         assert np.array_equal(H._parse(payload, (360, 520), 0, {}).q, qh.q)
@@ -494,7 +494,7 @@ def test_corrupt_or_truncated_context_coded_maps_are_bitstream_errors(rng):
     """Every truncation and bit flip of a coded map is refused with a BitstreamError naming
     the frame, or decodes to some map of the right shape on the grid: never another exception."""
     q = (np.clip(np.cumsum(rng.integers(-2, 3, (31, 41)), axis=1) + 20, 0, 42) * 6).astype(np.uint8)
-    payload = H._full_payload(H.QuantisedHint(q, 0.0, 1.0, 4, None))
+    payload = H.key_payload(H.QuantisedHint(q, 0.0, 1.0, 4, None))
     head = H._HEADER_V2.size
     refused = 0
     for cut in range(head, len(payload)):  # every truncation of the body
