@@ -5,8 +5,9 @@ The seed compares its codec with HEVC (x265) coding the views in raster order; A
 yuv420p (BT.601 limited range, as PyAV's default conversion, done by
 :func:`lfstream.io.video.rgb_to_video_i420`, 1.7x faster than swscale), one closed GOP holding every
 view of a frame, and the decoded views are measured with the same metrics as lfstream's
-own output. Views with an odd height or width are padded by edge replication to even
-size (4:2:0 needs it) and cropped after decoding; the padding's bits are counted.
+own output. Views are padded by edge replication to even size (4:2:0 needs it) and to at
+least :data:`ENCODER_MIN_SIDE` on each side, and cropped after decoding; the padding's bits
+are counted.
 
 * HEVC: libx265, preset ``medium``, ``keyint = U*V`` (one intra frame, then P/B frames),
   constant QP (``qp``) or, to hit a target rate, a bisection on x265's fractional CRF.
@@ -30,7 +31,12 @@ from lfstream.io.video import rgb_to_video_i420
 from lfstream.lightfield import check_lf, to_uint8
 
 ORDERS = ("raster", "serpentine", "spiral")
-MIN_CRF_SIDE = 64
+#: Views narrower or lower than this are padded up to it before coding: one x265 CTU and one
+#: SVT-AV1 superblock. Frames smaller than a block take the encoders' least exercised paths:
+#: x265 (PyAV 18.1 wheel) writes past its heap in CRF mode on frames under 56 px wide
+#: (valgrind: invalid writes in ``Lookahead::cuTree`` on 40x48 and 64x48 frames; glibc
+#: aborts), and a CI run crashed (SIGSEGV) inside an encoder's flush on 34x48 views.
+ENCODER_MIN_SIDE = 64
 
 
 def view_order(u: int, v: int, order: str = "raster") -> list[tuple[int, int]]:
@@ -82,7 +88,9 @@ class PseudoSequenceCodec:
             rc = f"qp={int(round(quality))}" if constant_qp else f"crf={quality:.3f}"
             return {"preset": preset or "medium",
                     "x265-params": f"{rc}:keyint={gop}:min-keyint={gop}:scenecut=0:log-level=error:frame-threads=1"}
-        return {"preset": preset or "8", "crf": str(int(round(quality))), "g": str(gop)}
+        from lfstream.codec.intra import svt_options
+
+        return {"preset": preset or "8", "crf": str(int(round(quality))), "g": str(gop), **svt_options()}
 
 
 CODECS = {
@@ -97,6 +105,13 @@ def _codec(name: str) -> PseudoSequenceCodec:
     return CODECS[name]
 
 
+def coded_size(size: tuple[int, int]) -> tuple[int, int]:
+    """The frame size views of ``size`` (H, W) are coded at: even, and at least
+    :data:`ENCODER_MIN_SIDE` on each side (edge-replicated; decoding crops back)."""
+    h, w = size
+    return max(h + h % 2, ENCODER_MIN_SIDE), max(w + w % 2, ENCODER_MIN_SIDE)
+
+
 def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order: str = "raster",
                  constant_qp: bool = True, preset: str | None = None) -> bytes:
     """Codes one LF frame ``(U, V, H, W, 3)`` as a pseudo-sequence; returns the bitstream.
@@ -106,11 +121,7 @@ def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order
     spec = _codec(codec)
     u, v, h, w, _ = check_lf(lf, allow_video=False)
     frame_lf = to_uint8(np.asarray(lf))
-    ph, pw = h + (h % 2), w + (w % 2)
-    if codec == "hevc" and not constant_qp and min(ph, pw) < MIN_CRF_SIDE:
-        # measured: x265 (PyAV 18.1 wheel) corrupts its heap in CRF mode on 40x48 frames
-        raise LFValueError(f"x265 CRF mode needs views of at least {MIN_CRF_SIDE}x{MIN_CRF_SIDE}; "
-                           "use constant QP for smaller views")
+    ph, pw = coded_size((h, w))
 
     if spec.encoder == "libsvtav1":
         from lfstream.codec.intra import quiet_svt_log
@@ -181,9 +192,8 @@ def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "r
         raise LFValueError(f"target bpp must be positive, got {target_bpp!r}")
     lo, hi = spec.quality_range
     shape = np.asarray(lf).shape
-    # x265's fractional CRF where it is safe, else integer constant QP
-    fractional = spec.fractional and min(shape[2], shape[3]) >= MIN_CRF_SIDE
-    constant_qp = codec == "hevc" and not fractional
+    fractional = spec.fractional  # x265's CRF is fractional (views are padded to a safe size)
+    constant_qp = False
     best: BaselineResult | None = None
     for _ in range(max_steps):
         q = 0.5 * (lo + hi) if fractional else float(int(round(0.5 * (lo + hi))))
@@ -209,4 +219,5 @@ def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "r
     return best
 
 
-__all__ = ["ORDERS", "CODECS", "view_order", "encode_views", "decode_views", "encode_at_bpp", "BaselineResult"]
+__all__ = ["ORDERS", "CODECS", "ENCODER_MIN_SIDE", "coded_size",
+           "view_order", "encode_views", "decode_views", "encode_at_bpp", "BaselineResult"]

@@ -15,6 +15,7 @@ the same bytes (SVT-AV1 at a fixed preset, checked by tests/codec/test_intra.py)
 from __future__ import annotations
 
 import os
+import platform
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -127,6 +128,23 @@ def quiet_svt_log() -> None:
     os.environ.setdefault("SVT_LOG", "1")
 
 
+#: The widest x86 instruction set SVT-AV1 may use. Capped at AVX2, the set every development
+#: and benchmark machine of this project has: the bytes then do not depend on whether a host
+#: also has AVX-512, and SVT-AV1's AVX-512 kernels (chosen by default where the CPU has them)
+#: are a path none of our machines exercises. A CI run once crashed (SIGSEGV) inside an
+#: SVT-AV1 or x265 flush on a host that may have had them; valgrind finds nothing in the AVX2
+#: paths (tests' 34x48 and 64x64 views).
+SVT_X86_ASM = "avx2"
+
+
+def svt_options() -> dict[str, str]:
+    """Options for every SVT-AV1 encoder lfstream opens: the instruction-set cap
+    (:data:`SVT_X86_ASM`) on x86-64; none elsewhere (SVT-AV1 names other sets there)."""
+    if platform.machine().lower() in ("x86_64", "amd64"):
+        return {"svtav1-params": f"asm={SVT_X86_ASM}"}
+    return {}
+
+
 def svtav1_encoder(size: tuple[int, int], quality: int, speed: int, gop: int | None = None):
     """An SVT-AV1 encoder context for even-sized 4:2:0 frames at ``quality`` (1..100, mapped
     by :func:`av1_crf`) and preset ``speed``; ``gop``: the key-frame interval, if set."""
@@ -137,7 +155,7 @@ def svtav1_encoder(size: tuple[int, int], quality: int, speed: int, gop: int | N
     ctx.height, ctx.width = size
     ctx.pix_fmt = "yuv420p"
     ctx.time_base = Fraction(1, 25)
-    options = {"preset": str(int(speed)), "crf": str(av1_crf(quality))}
+    options = {"preset": str(int(speed)), "crf": str(av1_crf(quality)), **svt_options()}
     if gop is not None:
         options["g"] = str(int(gop))
     ctx.options = options
@@ -204,5 +222,5 @@ def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int 
 
 __all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "AV1_MIN_SIZE", "av1_fits",
            "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
-           "svtav1_encoder", "quiet_svt_log",
+           "svtav1_encoder", "quiet_svt_log", "svt_options", "SVT_X86_ASM",
            "encode_av1", "decode_av1", "encode_centre", "decode_centre"]

@@ -63,6 +63,21 @@ def test_quality_maps_onto_the_whole_crf_range():
         CentreCoding("av1", speed=99)
 
 
+def test_svt_av1_is_capped_at_avx2_on_x86_and_left_alone_elsewhere(monkeypatch):
+    """Every SVT-AV1 encoder (centre view, residual, baseline) gets the same cap; the option
+    is accepted (the encode above and the baseline tests open encoders with it)."""
+    import platform
+
+    from lfstream.codec.baseline import CODECS
+    from lfstream.codec.intra import svt_options
+
+    monkeypatch.setattr(platform, "machine", lambda: "x86_64")
+    assert svt_options() == {"svtav1-params": "asm=avx2"}
+    assert CODECS["av1"].options(30, 9, True)["svtav1-params"] == "asm=avx2"
+    monkeypatch.setattr(platform, "machine", lambda: "aarch64")
+    assert svt_options() == {} and "svtav1-params" not in CODECS["av1"].options(30, 9, True)
+
+
 def test_damaged_av1_payload_is_a_bitstream_error(scene):
     data = encode_av1(scene[2, 2], 50)
     with pytest.raises(BitstreamError):
