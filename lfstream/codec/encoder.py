@@ -22,7 +22,7 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_version
 from lfstream.codec.hint import HintOptions, HintTracker
-from lfstream.codec.intra import CentreCoding, av1_fits, encode_centre
+from lfstream.codec.intra import AV1_MIN_VIEW, CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.shading import GainTracker, measure_gains, shading_present
 from lfstream.codec.watchdog import in_background
@@ -132,10 +132,19 @@ class Encoder:
     def header(self, views: tuple[int, int], size: tuple[int, int], fps: float) -> StreamHeader:
         from lfstream import __version__
 
-        if (self.coding.codec == "av1" or self.residual is not None) and not av1_fits(size):
-            raise LFValueError(f"preset {self.preset!r}" + (" with a residual layer" if self.residual is not None else "")
-                               + f": AV1 codes views of at least 3x3 pixels, these are {size[0]}x{size[1]}; "
-                               "use the fast preset (JPEG) without a residual")
+        centre_fails = self.coding.codec == "av1" and not av1_fits(size)
+        # a half-views residual codes the views at half size
+        residual_fails = False
+        if self.residual is not None:
+            from lfstream.codec.residual import coded_size as residual_coded_size
+
+            residual_fails = not av1_fits(residual_coded_size(size, self.residual_mode))
+        if centre_fails or residual_fails:
+            what = f"preset {self.preset!r}" + (f" with a {self.residual_mode} residual" if self.residual is not None else "")
+            half_views = residual_fails and self.residual_mode == "half-views"
+            half = " (a half-views residual codes them at half size)" if half_views else ""
+            raise LFValueError(f"{what}: AV1 codes views of at least {AV1_MIN_VIEW} pixels{half}, these are "
+                               f"{size[0]}x{size[1]}; use the fast preset (JPEG) without a residual")
         meta = {"encoder": ENCODER_NAME, "version": __version__, "quality": int(self.quality), "gain_grid": self.gain_grid}
         if self.coding.codec != "jpeg":  # JPEG streams keep the version-1 header byte for byte
             meta["preset"] = self.preset

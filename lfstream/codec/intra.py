@@ -110,13 +110,17 @@ def pad_to_even(img: np.ndarray) -> np.ndarray:
     return np.pad(img, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
 
 
-#: SVT-AV1 refuses frames smaller than 4 x 4 (after padding to even): AV1 codes views of at
-#: least 3 x 3 pixels.
-AV1_MIN_SIZE = 4
+#: The smallest frame, on each side after padding to even, lfstream gives SVT-AV1. SVT-AV1
+#: 4.1.0 accepts frames down to 4 x 4 but writes past its heap on small ones (valgrind, presets
+#: 4 / 8 / 12 / 13: invalid writes and a crash on 4x4, 16x16 and 24x24 frames, invalid reads
+#: on 8x8 and 64x24 (H x W) ones; clean on every frame from 32 x 32 up that was tried).
+AV1_MIN_SIZE = 32
+#: The smallest view AV1 codes, as the errors name it.
+AV1_MIN_VIEW = f"{AV1_MIN_SIZE - 1}x{AV1_MIN_SIZE - 1}"
 
 
 def av1_fits(size: tuple[int, int]) -> bool:
-    """Whether SVT-AV1 can code views of ``size`` (H, W) (:data:`AV1_MIN_SIZE`)."""
+    """Whether lfstream codes frames of ``size`` (H, W) with SVT-AV1 (:data:`AV1_MIN_SIZE`)."""
     h, w = size
     return h + h % 2 >= AV1_MIN_SIZE and w + w % 2 >= AV1_MIN_SIZE
 
@@ -150,6 +154,8 @@ def svtav1_encoder(size: tuple[int, int], quality: int, speed: int, gop: int | N
     by :func:`av1_crf`) and preset ``speed``; ``gop``: the key-frame interval, if set."""
     import av
 
+    if not av1_fits(size):  # checked by every caller first; here so that no path reaches SVT-AV1
+        raise LFValueError(f"AV1 codes views of at least {AV1_MIN_VIEW} pixels, got {size[0]}x{size[1]}")
     quiet_svt_log()
     ctx = av.CodecContext.create("libsvtav1", "w")
     ctx.height, ctx.width = size
@@ -220,7 +226,7 @@ def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int 
     raise BitstreamError(f"unknown centre-view codec id {codec_id}", frame)
 
 
-__all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "AV1_MIN_SIZE", "av1_fits",
+__all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "AV1_MIN_SIZE", "AV1_MIN_VIEW", "av1_fits",
            "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
            "svtav1_encoder", "quiet_svt_log", "svt_options", "SVT_X86_ASM",
            "encode_av1", "decode_av1", "encode_centre", "decode_centre"]

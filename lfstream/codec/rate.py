@@ -41,7 +41,7 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_header, pack_packet
 from lfstream.codec.hint import HintOptions, key_payload
-from lfstream.codec.intra import CentreCoding, av1_fits, encode_centre
+from lfstream.codec.intra import AV1_MIN_VIEW, CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.residual import VIEW_MODES
 from lfstream.codec.shading import measure_gains
@@ -634,7 +634,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     presets = tuple(PRESETS) if preset is None else (preset,)
     if not av1_fits(frames.shape[3:5]):  # views too small for AV1: the JPEG preset alone, no residual
         if preset not in (None, "fast"):
-            raise LFValueError(f"preset {preset!r}: AV1 codes views of at least 3x3 pixels, these are "
+            raise LFValueError(f"preset {preset!r}: AV1 codes views of at least {AV1_MIN_VIEW} pixels, these are "
                                f"{frames.shape[3]}x{frames.shape[4]}")
         presets, residual = ("fast",), False
     pixels = int(np.prod(frames.shape[:5]))
