@@ -193,13 +193,12 @@ def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "r
     lo, hi = spec.quality_range
     shape = np.asarray(lf).shape
     fractional = spec.fractional  # x265's CRF is fractional (views are padded to a safe size)
-    constant_qp = False
     best: BaselineResult | None = None
     for _ in range(max_steps):
         q = 0.5 * (lo + hi) if fractional else float(int(round(0.5 * (lo + hi))))
-        data = encode_views(lf, codec, q, order, constant_qp=constant_qp, preset=preset)
+        data = encode_views(lf, codec, q, order, constant_qp=False, preset=preset)
         rate = bits_per_pixel(len(data), shape)
-        res = BaselineResult(codec, order, q, len(data), rate, data, constant_qp)
+        res = BaselineResult(codec, order, q, len(data), rate, data)
         if best is None or abs(rate - target_bpp) < abs(best.bpp - target_bpp):
             best = res
         if abs(rate - target_bpp) <= tolerance * target_bpp:
@@ -210,10 +209,10 @@ def encode_at_bpp(lf: np.ndarray, codec: str, target_bpp: float, order: str = "r
             hi = q
         if not fractional and hi - lo <= 1:
             for q2 in (lo, hi):
-                data = encode_views(lf, codec, q2, order, constant_qp=constant_qp, preset=preset)
+                data = encode_views(lf, codec, q2, order, constant_qp=False, preset=preset)
                 rate = bits_per_pixel(len(data), shape)
                 if abs(rate - target_bpp) < abs(best.bpp - target_bpp):
-                    best = BaselineResult(codec, order, q2, len(data), rate, data, constant_qp)
+                    best = BaselineResult(codec, order, q2, len(data), rate, data)
             break
     assert best is not None
     return best

@@ -164,12 +164,7 @@ def test_views_too_small_for_av1_are_a_clear_error_and_the_default_still_codes_t
     """SVT-AV1 writes past its heap on frames under 32 px a side (it refuses only those under
     4x4): AV1 presets and residuals name the limit (an LFValueError raised before any
     encoder opens); the default and rate control keep to JPEG."""
-    from lfstream.codec.intra import av1_fits, svtav1_encoder
     from lfstream.errors import LFValueError
-
-    assert av1_fits((31, 31)) and av1_fits((32, 400)) and not av1_fits((30, 400)) and not av1_fits((400, 29))
-    with pytest.raises(LFValueError, match="at least 31x31"):
-        svtav1_encoder((24, 64), 50, 12)  # the one door to SVT-AV1 checks too
 
     lf = np.random.default_rng(0).integers(0, 256, (3, 3, *size, 3), dtype=np.uint8)
     for kwargs in ({"preset": "balanced"}, {"preset": "fast", "residual": 50, "residual_mode": "views"}):
@@ -177,9 +172,18 @@ def test_views_too_small_for_av1_are_a_clear_error_and_the_default_still_codes_t
             lfstream.encode(lf, **kwargs)
     for data in (lfstream.encode(lf), lfstream.encode(lf, bpp=0.5)):
         assert lfstream.decode(data)[0].shape == lf.shape
-    if min(size) >= 16:  # a half-views residual codes views at half size: 40x64 views are too small
-        with pytest.raises(LFValueError, match="half-views"):
-            lfstream.encode(np.zeros((3, 3, 40, 64, 3), np.uint8), residual=50, residual_mode="half-views")
+
+
+def test_the_av1_limit_holds_at_the_encoder_door_and_at_a_half_views_residual_size():
+    from lfstream.codec.intra import av1_fits, svtav1_encoder
+    from lfstream.errors import LFValueError
+
+    assert av1_fits((31, 31)) and av1_fits((32, 400)) and not av1_fits((30, 400)) and not av1_fits((400, 29))
+    with pytest.raises(LFValueError, match="at least 31x31"):
+        svtav1_encoder((24, 64), 50, 12)  # the one door to SVT-AV1 checks too
+    # a half-views residual codes views at half size: 40x64 views are too small
+    with pytest.raises(LFValueError, match="half-views"):
+        lfstream.encode(np.zeros((3, 3, 40, 64, 3), np.uint8), residual=50, residual_mode="half-views")
 
 
 def test_svt_av1_prints_nothing_unless_asked():
