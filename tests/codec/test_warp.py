@@ -11,6 +11,9 @@ from lfstream.codec import warp as warp_module
 from lfstream.codec.shading import apply_gains
 from lfstream.codec.warp import (
     SPLAT_TOLERANCE_PX,
+    VIEW_COST_SPLAT,
+    VIEW_COST_TAPS,
+    deal_views,
     splat_views,
     view_disparities,
     warp_views,
@@ -136,6 +139,55 @@ def test_fused_warp_same_bytes_at_any_thread_count(rng):
     finally:
         numba.set_num_threads(threads)
     assert all((o == outs[0]).all() for o in outs)
+
+
+@pytest.mark.parametrize("channels", [1, 3, 4])
+def test_the_centre_view_is_the_centre_bit_for_bit(channels, rng):
+    """The centre view is copied, not sampled (every sample position is a pixel's own,
+    whatever the disparity): without gains it is the centre view itself, with gains within
+    a level of OpenCV's up-sampled gains multiplied in."""
+    centre, disp = _scene(seed=4, size=(26, 34))
+    img = np.ascontiguousarray(np.concatenate([centre, centre[..., :1]], axis=-1)[..., :channels])
+    for d in (disp, disp * 40.0):
+        for occlusion in (True, False):
+            np.testing.assert_array_equal(warp_views(img, d, (3, 5), occlusion=occlusion)[1, 2], img)
+    maps = view_disparities(disp, (3, 3)) * 1.5
+    np.testing.assert_array_equal(warp_views_per_view(img, maps)[1, 1], img)
+    gains = rng.uniform(0.7, 1.3, (3, 3, 2, 3, channels)).astype(np.float32)
+    ref = apply_gains(np.broadcast_to(img, (3, 3, *img.shape)).copy(), gains)[1, 1]
+    diff = np.abs(warp_views(img, disp, (3, 3), gains=gains)[1, 1].astype(int) - ref.astype(int))
+    assert diff.max() <= 1 and diff.mean() < 0.25  # OpenCV's up-sampled gains, rounded once more
+
+
+def test_views_are_dealt_by_cost_and_each_once():
+    """3x3 with the four corners splatted: round-robin gave one task the corners and the
+    centre; the deal gives each task two corners. Every view is dealt exactly once, tasks are
+    never more than the views, and no task's estimated load exceeds another's by more than
+    the costliest view (the bound of dealing longest first)."""
+    offsets = view_offsets((3, 3))
+    splat = np.zeros((3, 3), bool)
+    splat[[0, 0, 2, 2], [0, 2, 0, 2]] = True
+    order, starts = deal_views(offsets, splat, 2)
+    assert sorted(order.tolist()) == list(range(9)) and starts.tolist() == [0, 5, 9]
+    corners = {0, 2, 6, 8}
+    assert [len(corners & set(order[starts[t]:starts[t + 1]].tolist())) for t in range(2)] == [2, 2]
+    order, starts = deal_views(offsets, splat, 16)
+    assert starts.tolist() == list(range(10)) and sorted(order.tolist()) == list(range(9))
+    order, starts = deal_views(offsets, splat, 1)
+    assert starts.tolist() == [0, 9] and sorted(order.tolist()) == list(range(9))
+    offsets = view_offsets((7, 7))
+    splat = splat_views(np.outer(np.linspace(-1, 1, 40), np.ones(30)).astype(np.float32), offsets, 0.3)
+    du, dv = offsets[..., 0].ravel() != 0, offsets[..., 1].ravel() != 0
+    kind = np.where(du & dv, "all", np.where(du, "column", np.where(dv, "row", "centre")))
+    cost = np.array([VIEW_COST_TAPS[k] for k in kind]) + VIEW_COST_SPLAT * splat.ravel()
+    for tasks in (2, 3, 5):
+        order, starts = deal_views(offsets, splat, tasks)
+        assert sorted(order.tolist()) == list(range(49))
+        loads = [cost[order[starts[t]:starts[t + 1]]].sum() for t in range(tasks)]
+        assert max(loads) - min(loads) <= cost.max() + 1e-9
+        # deterministic, and a copy the caller may keep
+        again = deal_views(offsets, splat, tasks)
+        assert (again[0] == order).all() and again[0] is not order
 
 
 @pytest.mark.parametrize("channels", [3, 4])
