@@ -130,19 +130,29 @@ def pack_lanes(img, ch0, n_ch, packed):  # pragma: no cover - compiled
 
 
 @numba.njit(**_ROW)
-def _splat_view(disp, cols, du, dv, dview, targets):  # pragma: no cover - compiled
+def _splat_view(disp, cols, du, dv, dview, targets, rows, reach, counts):  # pragma: no cover - compiled
     """Forward-splats the centre disparity into view (du, dv): nearest pixel, nearer wins.
 
     Per row, the target pixels first (a loop that vectorises: ``cols`` is ``x`` as float32,
     since converting the int64 loop counter does not vectorise on AVX2), then the scattered
     z-tested stores; ``targets`` (W,) int32 scratch, -1 where the pixel lands outside.
+
+    Only the view rows ``rows`` (H,) bool are wanted: a centre row is splatted where one of
+    them lies within ``reach`` rows of it (no centre pixel lands further from its own row,
+    :func:`lfstream.codec.warp.splat_rows`), so those rows are exactly what splatting every
+    row gives; the others may hold partial results. ``counts`` (H + 1,) int32 scratch.
     """
     h, w = disp.shape
     h32, w32 = np.int32(h), np.int32(w)
     flat = dview.ravel()
     for i in range(h * w):
         flat[i] = _HOLE
+    counts[0] = 0
     for y in range(h):
+        counts[y + 1] = counts[y] + (1 if rows[y] else 0)
+    for y in range(h):
+        if counts[min(y + reach + 1, h)] == counts[max(y - reach, 0)]:
+            continue  # no wanted row within reach
         row = disp[y]
         fy = np.float32(y)
         for x in range(w):
@@ -347,7 +357,7 @@ def _row_sample3_gain(packed, stride, idx, fxs, fys, taps, top, bottom, wa, vals
 
 
 @numba.njit(**_PARALLEL)
-def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, splat, gains, g_rows, g_row_w,
+def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, splat, reach, gains, g_rows, g_row_w,
                    g_cols, g_col_w, order, starts, out):  # pragma: no cover - compiled
     """Every view of a light field from its centre view and disparity, in one parallel pass.
 
@@ -355,7 +365,8 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, splat,
     offsets[u, v]`` (:func:`lfstream.lightfield.view_offsets`; bilinear,
     1/1024-pixel fixed point, border replicated), where ``d`` is the centre
     map forward-splatted into the view with a z-test, holes given the background side's
-    disparity (where ``splat[u, v]``; :func:`_fill_holes`), or the centre map at the view pixel; the sample is multiplied by the
+    disparity (in the view rows where ``splat[u, v, y]``; :func:`_fill_holes`), or the centre
+    map at the view pixel; the sample is multiplied by the
     view's gain map, bilinearly up-sampled (OpenCV's INTER_LINEAR resize), and rounded.
 
     Args:
@@ -366,7 +377,9 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, splat,
         view_disp: (U, V, H, W) float32 per-view disparities (Depth-Net's maps), used in
             place of splatting ``disp``; shape (0, 0, 1, 1): none.
         offsets: (U, V, 2) float32 displacement of each view per unit disparity.
-        splat: (U, V) bool, the views whose disparity is splatted (never the centre view).
+        splat: (U, V, H) bool, the view rows whose disparity is splatted (never the centre
+            view's; :func:`lfstream.codec.warp.splat_rows`).
+        reach: (U, V) int64, how many rows from its own a centre pixel can land in each view.
         gains: (U, V, gh, gw, Cg) float32 gain maps (Cg = 1 or C), or shape (0, 0, 1, 1, 1): none.
         g_rows, g_row_w: (H, 2) int64 grid rows per image row and the weight of the first.
         g_cols, g_col_w: (W, 2) and (W,) the same per column.
@@ -391,15 +404,18 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, splat,
         gh = gains.shape[2] if has_gains else 1
         gcols = np.ones((gh, w * n_ch), np.float32)
         vals = np.empty(w * n_ch, np.int32)
+        counts = np.empty(h + 1, np.int32)
         for i in range(starts[task], starts[task + 1]):
             k = order[i]
-            _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, k // n_v, k % n_v, splat, gains,
-                       g_rows, g_row_w, g_cols, g_col_w, dview, cols, targets, holes, idx, fxs, fys, gcols, vals, out)
+            _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, k // n_v, k % n_v, splat, reach, gains,
+                       g_rows, g_row_w, g_cols, g_col_w, dview, cols, targets, holes, counts, idx, fxs, fys, gcols,
+                       vals, out)
 
 
 @numba.njit(**_ROW)
-def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, splat, gains, g_rows, g_row_w,
-               g_cols, g_col_w, dview, cols, targets, holes, idx, fxs, fys, gcols, vals, out):  # pragma: no cover
+def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, splat, reach, gains, g_rows, g_row_w,
+               g_cols, g_col_w, dview, cols, targets, holes, counts, idx, fxs, fys, gcols, vals,
+               out):  # pragma: no cover
     """One view of :func:`warp_all_views`, in the caller's scratch buffers."""
     h, w = disp.shape
     has_gains = gains.shape[0] > 0
@@ -411,9 +427,15 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, spla
     # a view on the centre's row samples at y exactly (y + d * 0: the vertical fraction is 0
     # for every pixel, whatever d), one on its column at x exactly: two taps suffice
     taps = _TAPS_ROW if du == 0 else (_TAPS_COLUMN if dv == 0 else _TAPS_ALL)
-    splatted = splat[u, v] and not (du == 0 and dv == 0) and not per_view
+    rows = splat[u, v]
+    splatted = False
+    if not (du == 0 and dv == 0) and not per_view:
+        for y in range(h):
+            if rows[y]:
+                splatted = True
+                break
     if splatted:
-        _splat_view(disp, cols, du, dv, dview, targets)
+        _splat_view(disp, cols, du, dv, dview, targets, rows, reach[u, v], counts)
     # the gain map up-sampled along x once per view (gh rows); each image row then
     # blends two of them
     gh = gcols.shape[0]
@@ -433,7 +455,7 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, spla
     for y in range(h):
         if per_view:
             _row_taps(view_disp[u, v, y], cols, y, du, dv, h, idx, fxs, fys)
-        elif splatted:
+        elif splatted and rows[y]:
             _fill_holes(disp[y], dview[y], holes)  # the splat's scratch row, in place
             _row_taps(dview[y], cols, y, du, dv, h, idx, fxs, fys)
         else:
@@ -451,15 +473,15 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, spla
 
 
 @numba.njit(**_PARALLEL)
-def splat_all_views(disp, offsets, splat, out):  # pragma: no cover - compiled
+def splat_all_views(disp, offsets, splat, reach, out):  # pragma: no cover - compiled
     """The per-view disparities :func:`warp_all_views` samples with: ``disp`` forward-splatted
-    into each view and its holes filled (where ``splat[u, v]``), or ``disp`` itself; warping
-    with these as ``view_disp`` gives the same views, bit for bit.
+    into each view and its holes filled (in the rows where ``splat[u, v, y]``), or ``disp``
+    itself; warping with these as ``view_disp`` gives the same views, bit for bit.
 
     Args:
         disp: (H, W) float32 centre-view disparity.
         offsets: (U, V, 2) float32 displacement of each view per unit disparity.
-        splat: (U, V) bool, the views to splat.
+        splat: (U, V, H) bool, the view rows to splat; reach: (U, V) int64 (:func:`warp_all_views`).
         out: (U, V, H, W) float32, overwritten.
     """
     h, w = disp.shape
@@ -470,15 +492,46 @@ def splat_all_views(disp, offsets, splat, out):  # pragma: no cover - compiled
         du = offsets[u, v, 0]
         dv = offsets[u, v, 1]
         dview = out[u, v]
-        if not splat[u, v] or (du == 0 and dv == 0):
+        rows = splat[u, v]
+        if du == 0 and dv == 0 or not rows.any():
             dview[:] = disp
             continue
         cols = np.arange(w).astype(np.float32)
         targets = np.empty(w, np.int32)
         holes = _hole_scratch(w)
-        _splat_view(disp, cols, du, dv, dview, targets)
+        counts = np.empty(h + 1, np.int32)
+        _splat_view(disp, cols, du, dv, dview, targets, rows, reach[u, v], counts)
         for y in range(h):
-            _fill_holes(disp[y], dview[y], holes)
+            if rows[y]:
+                _fill_holes(disp[y], dview[y], holes)
+            else:
+                dview[y] = disp[y]
+
+
+@numba.njit(**_ROW)
+def row_fold_bounds(disp, rx, ry):  # pragma: no cover - compiled
+    """:func:`fold_bounds` per row: ``rx[y]`` the largest ``|d(y, x+1) - d(y, x)| *
+    max(|d(y, x)|, |d(y, x+1)|)`` of row ``y``, ``ry[y]`` the same between rows ``y`` and
+    ``y + 1`` (0 for the last row); the same float32 products.
+
+    Args:
+        disp: (H, W) float32; rx, ry: (H,) float32, overwritten.
+    """
+    h, w = disp.shape
+    for y in range(h):
+        row = disp[y]
+        mx = np.float32(0.0)
+        for x in range(w - 1):
+            a, b = row[x], row[x + 1]
+            mx = max(mx, abs(b - a) * max(abs(a), abs(b)))
+        rx[y] = mx
+        my = np.float32(0.0)
+        if y + 1 < h:
+            nxt = disp[y + 1]
+            for x in range(w):
+                a, b = row[x], nxt[x]
+                my = max(my, abs(b - a) * max(abs(a), abs(b)))
+        ry[y] = my
 
 
 @numba.njit(**_ROW)

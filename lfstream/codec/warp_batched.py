@@ -22,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lfstream.codec.warp import SPLAT_TOLERANCE_PX, _check_views, _linear_taps, _splat_mask
+from lfstream.codec import warp as _warp
+from lfstream.codec.warp import _check_views, _linear_taps, _rows_from_bounds
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import view_offsets
 
@@ -70,6 +71,25 @@ def _splat(d: torch.Tensor, du: torch.Tensor, dv: torch.Tensor) -> torch.Tensor:
     flat = torch.full((b * n * h * w + 1,), _HOLE, dtype=torch.float32, device=dev)
     flat.scatter_reduce_(0, target.reshape(-1), d.expand(b, n, h, w).reshape(-1), reduce="amax", include_self=True)
     return flat[:-1].view(b, n, h, w)
+
+
+def _row_fold_bounds(d: torch.Tensor) -> torch.Tensor:
+    """Per frame and row ``(rx, ry)`` of the centre maps ``d`` (B, 1, H, W), as
+    :func:`lfstream.codec._kernels.row_fold_bounds` computes them (the same float32
+    operations, each rounded once, so the same values; ``ry`` of the last row 0).
+
+    Shape:
+        - output: ``(B, 2, H)`` float32
+    """
+    b, _, h, w = d.shape
+    out = torch.zeros((b, 2, h), dtype=torch.float32, device=d.device)
+    if w > 1:
+        a, c = d[..., :-1], d[..., 1:]
+        out[:, 0] = ((c - a).abs() * torch.maximum(a.abs(), c.abs())).amax(dim=-1)[:, 0]
+    if h > 1:
+        a, c = d[..., :-1, :], d[..., 1:, :]
+        out[:, 1, :-1] = ((c - a).abs() * torch.maximum(a.abs(), c.abs())).amax(dim=-1)[:, 0]
+    return out
 
 
 def _fold_bounds(d: torch.Tensor) -> torch.Tensor:
@@ -173,7 +193,7 @@ def warp_views_batched(
         disparities: ``(B, H, W)`` float32 centre-view disparities, px per view step.
         views: ``(U, V)`` of the output.
         occlusion: per-view disparity by z-tested forward splatting where it can matter
-            (as ``warp_views``: :func:`lfstream.codec.warp.splat_views`, per frame).
+            (as ``warp_views``: the rows :func:`lfstream.codec.warp.splat_rows` names, per frame).
         gains: ``(B, U, V, gh, gw, 1 or C)`` float32 gain maps, or ``None``; a frame whose
             maps are all within 1e-6 of 1 is warped without gains, as ``warp_views`` does.
         axes: ``(2, 2)`` view axes shared by the frames; ``None``: the convention.
@@ -216,11 +236,17 @@ def warp_views_batched(
         rows, row_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(h, gains.shape[3]))
         cols, col_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(w, gains.shape[4]))
         gains = gains.reshape(b, u * v, *gains.shape[3:])
-    splat = splat_host = None  # (B, U*V) bool: the views each frame splats (on the device; on the host)
+    splat = splat_host = splat_rows = None  # (B, U*V) bool: the views each frame splats (on the device; on the host)
     if occlusion and view_disparities is None:
-        splat_host = np.stack([_splat_mask(mx, my, grid_offsets, SPLAT_TOLERANCE_PX)
-                               for mx, my in _fold_bounds(d).tolist()])
+        # the rows each view splats (lfstream.codec.warp.splat_rows), decided on the host from
+        # the same float32 bounds as the CPU kernel's; the splat itself runs over every row
+        bounds = _row_fold_bounds(d).cpu().numpy()
+        dmax = d.abs().flatten(1).amax(dim=1).cpu().numpy()
+        rows_host = np.stack([_rows_from_bounds(bd[0], bd[1], float(m), grid_offsets, _warp.SPLAT_TOLERANCE_PX)
+                              for bd, m in zip(bounds, dmax)]).reshape(b, u * v, h)
+        splat_host = rows_host.any(axis=-1)
         splat = torch.from_numpy(splat_host).to(dev)
+        splat_rows = torch.from_numpy(rows_host).to(dev)  # (B, U*V, H)
     out = torch.empty((b, u * v, h, w, c), dtype=torch.uint8, device=dev)
     step = max(1, chunk_pixels // max(1, b * h * w))
     fused = _fused_warp(dev)
@@ -245,8 +271,8 @@ def warp_views_batched(
             if fused is not None:
                 maps = fused.splat_maps(d, offsets, splat, k0, n)
             else:
-                still = (~splat[:, k0:k1]).view(b, n, 1, 1).expand(b, n, h, w)  # never the centre view
-                maps = torch.where(still, d, _fill_holes(_splat(d, du, dv), d))
+                maps = _fill_holes(_splat(d, du, dv), d)
+            maps = torch.where(splat_rows[:, k0:k1, :, None], maps, d)  # rows not splatted: the centre map
         else:
             maps = d.expand(b, n, h, w)
         if fused is not None:

@@ -14,6 +14,8 @@ from lfstream.codec.warp import (
     VIEW_COST_SPLAT,
     VIEW_COST_TAPS,
     deal_views,
+    splat_reach,
+    splat_rows,
     splat_views,
     view_disparities,
     warp_views,
@@ -26,18 +28,19 @@ from lfstream.synth import synth_clip
 
 
 def _reference_maps(disp: np.ndarray, n_u: int, n_v: int, occlusion: bool, axes=None, splat=None) -> np.ndarray:
-    """maps[u, v, y, x] = (x_src, y_src), written out in plain Python: z-tested forward splatting,
-    holes given the disparity of their background-side neighbour, in the views ``splat``
-    (default: those :func:`splat_views` names, with ``occlusion``)."""
+    """maps[u, v, y, x] = (x_src, y_src), written out in plain Python: z-tested forward splatting
+    of every centre pixel, holes given the disparity of their background-side neighbour, in
+    the view rows ``splat`` (default: those :func:`splat_rows` names, with ``occlusion``);
+    the centre map in the others."""
     h, w = disp.shape
     maps = np.empty((n_u, n_v, h, w, 2), np.float32)
     offsets = view_offsets((n_u, n_v), axes)
     if splat is None:
-        splat = splat_views(disp, offsets) if occlusion else np.zeros((n_u, n_v), bool)
+        splat = splat_rows(disp, offsets) if occlusion else np.zeros((n_u, n_v, h), bool)
     for u in range(n_u):
         for v in range(n_v):
             du, dv = offsets[u, v]
-            if not splat[u, v] or (du == 0 and dv == 0):
+            if not splat[u, v].any() or (du == 0 and dv == 0):
                 for y in range(h):
                     for x in range(w):
                         d = disp[y, x]
@@ -53,6 +56,10 @@ def _reference_maps(disp: np.ndarray, n_u: int, n_v: int, occlusion: bool, axes=
             for y in range(h):
                 row = view[y]
                 holes = ~np.isfinite(row)
+                if not splat[u, v, y]:
+                    for x in range(w):
+                        maps[u, v, y, x] = (x + disp[y, x] * dv, y + disp[y, x] * du)
+                    continue
                 for x in range(w):
                     if not holes[x]:
                         maps[u, v, y, x] = (x + row[x] * dv, y + row[x] * du)
@@ -323,27 +330,58 @@ def test_splat_views_is_the_documented_bound(amplitude):
 
 
 def test_views_without_the_splat_are_the_splatted_views_within_the_tolerance(monkeypatch):
-    """Where splat_views skips a view, its samples are at most a quarter pixel from the
+    """Where splat_rows skips a view row, its samples are at most a quarter pixel from the
     splatted ones' (plus the splat's own nearest-pixel rounding): on a textured centre with a
-    gentle disparity the decoded views differ from splatting every view by under a level on
-    average, and the skip leaves strong parallax alone (those views are splatted)."""
+    gentle disparity the decoded rows differ from splatting every row by under a level on
+    average, the splatted rows are the same bytes, and the rule leaves strong parallax alone
+    (skipping those rows too moves them over three times as much)."""
     clip = synth_clip(1, 7, (60, 84), seed=4, layers=1, motion=0, camera_pan=0)
     centre = clip.lf[0, 3, 3]
     d = _smooth_disparity(60, 84, 0.8)
-    mask = splat_views(d, view_offsets((7, 7)))
-    assert 0 < mask.sum() < 48  # the inner views skip it, the outer ones keep it
+    offsets = view_offsets((7, 7))
+    mask = splat_rows(d, offsets)
+    views = splat_views(d, offsets)
+    assert 0 < mask.sum() < mask.size and not mask[~views].any()  # rows of the views splat_views names
+    assert (mask.any(-1) & ~mask.all(-1)).any()  # some views splat some rows, not all
     ring = np.maximum(np.abs(np.arange(7)[:, None] - 3), np.abs(np.arange(7)[None] - 3))
     assert not mask[ring == 1].any() and mask[ring == 3].any()
     got = warp_views(centre, d, (7, 7))
-    monkeypatch.setattr(warp_module, "splat_views", lambda disp, off, tolerance=0.0: splat_views(disp, off, 0.0))
+    monkeypatch.setattr(warp_module, "SPLAT_TOLERANCE_PX", 0.0)
     everywhere = warp_views(centre, d, (7, 7))
     diff = np.abs(got.astype(int) - everywhere.astype(int))
-    assert np.array_equal(got[mask], everywhere[mask])  # splatted views: the same bytes
+    assert np.array_equal(got[mask], everywhere[mask])  # splatted rows: the same bytes
     # measured: mean 0.12 levels, 99th percentile 1 (a texture edge moved by a fraction of
     # a pixel makes the rare larger difference)
     assert diff[~mask].mean() < 0.25 and np.percentile(diff[~mask], 99) <= 2
-    # and the views it keeps are those where the splat matters: skipping it there too moves
-    # them over three times as much
-    monkeypatch.setattr(warp_module, "splat_views", lambda disp, off, tolerance=0.0: np.zeros(off.shape[:2], bool))
+    monkeypatch.setattr(warp_module, "SPLAT_TOLERANCE_PX", np.inf)
     none = np.abs(warp_views(centre, d, (7, 7)).astype(int) - everywhere.astype(int))
     assert none[mask].mean() > 3 * diff[~mask].mean()
+
+
+def test_splat_rows_is_the_bound_over_the_rows_within_reach():
+    """A view row is splatted exactly where the bound of the fold maxima over the centre rows
+    within the view's reach exceeds the tolerance (float64 reference, away from the
+    threshold); the reach covers every row a centre pixel lands on."""
+    d = _smooth_disparity(41, 37, 1.3)
+    d[5:9, 10:20] += np.float32(0.9)  # an edge in a few rows only
+    axes = np.array([[1.0, 0.2], [-0.1, 0.9]], np.float32)
+    offsets = view_offsets((5, 7), axes)
+    got = splat_rows(d, offsets)
+    d64 = d.astype(np.float64)
+    rx = (np.abs(np.diff(d64, axis=1)) * np.maximum(np.abs(d64[:, :-1]), np.abs(d64[:, 1:]))).max(axis=1)
+    ry = np.append((np.abs(np.diff(d64, axis=0)) * np.maximum(np.abs(d64[:-1]), np.abs(d64[1:]))).max(axis=1), 0.0)
+    reach = splat_reach(float(np.abs(d).max()), offsets)
+    rows = np.arange(41)[:, None]
+    for u in range(5):
+        for v in range(7):
+            du, dv = abs(float(offsets[u, v, 0])), abs(float(offsets[u, v, 1]))
+            r = int(reach[u, v])
+            # no centre pixel lands further than the reach from its own row
+            assert r >= np.abs(np.floor(rows - d64 * float(offsets[u, v, 0]) + 0.5) - rows).max()
+            for y in range(41):
+                lo, hi = max(0, y - r), min(41, y + r + 1)
+                bound = np.hypot(du, dv) * (du * ry[lo:hi].max() + dv * rx[lo:hi].max())
+                if abs(bound - SPLAT_TOLERANCE_PX) > 1e-5:
+                    assert got[u, v, y] == (bound > SPLAT_TOLERANCE_PX and (du > 0 or dv > 0)), (u, v, y)
+    assert not got[2, 3].any()
+    assert got.any() and not got.all(axis=-1)[got.any(axis=-1)].all()
