@@ -544,20 +544,11 @@ def fold_bounds(disp):  # pragma: no cover - compiled
     Args:
         disp: (H, W) float32.
     """
-    h, w = disp.shape
-    mx = np.float32(0.0)
-    my = np.float32(0.0)
-    for y in range(h):
-        row = disp[y]
-        for x in range(w - 1):
-            a, b = row[x], row[x + 1]
-            mx = max(mx, abs(b - a) * max(abs(a), abs(b)))
-        if y + 1 < h:
-            nxt = disp[y + 1]
-            for x in range(w):
-                a, b = row[x], nxt[x]
-                my = max(my, abs(b - a) * max(abs(a), abs(b)))
-    return mx, my
+    h = disp.shape[0]
+    rx = np.empty(h, np.float32)
+    ry = np.empty(h, np.float32)
+    row_fold_bounds(disp, rx, ry)
+    return rx.max(), ry.max()  # maxima of the rows' maxima: the same float32 values
 
 
 @numba.njit(**_ROW)

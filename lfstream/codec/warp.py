@@ -104,28 +104,23 @@ def splat_reach(max_abs_disparity: float, offsets: np.ndarray) -> np.ndarray:
 
 
 def _window_max(a: np.ndarray, r: int) -> np.ndarray:
-    """``out[y] = max(a[y - r : y + r + 1])``, clipped at the ends (a sparse table: ``O(H log r)``)."""
+    """``out[y] = max(a[y - r : y + r + 1])``, clipped at the ends: a sparse table for the
+    full windows (``O(H log r)``), running maxima for those the ends clip."""
     h = a.shape[0]
     if r >= h - 1:
         return np.full(h, a.max(initial=0.0), a.dtype)
-    n = 2 * r + 1
-    table = [a]
-    span = 1
-    while 2 * span <= n:  # table[k][i] = max(a[i : i + 2**k])
-        prev = table[-1]
-        table.append(np.maximum(prev[:-span], prev[span:]))
-        span *= 2
-    k = len(table) - 1
-    lo = np.clip(np.arange(h) - r, 0, h - 1)
-    hi = np.clip(np.arange(h) + r, 0, h - 1)  # inclusive
-    width = hi - lo + 1
-    # windows clipped at the ends are shorter than n: their own largest power of two
-    ks = np.minimum(np.floor(np.log2(width)).astype(np.int64), k)
+    y = np.arange(h)
     out = np.empty(h, a.dtype)
-    for kk in np.unique(ks):
-        sel = ks == kk
-        t = table[kk]
-        out[sel] = np.maximum(t[lo[sel]], t[hi[sel] - (1 << kk) + 1])
+    out[:r] = np.maximum.accumulate(a)[np.minimum(y[:r] + r, h - 1)]
+    out[h - r:] = np.maximum.accumulate(a[::-1])[::-1][np.maximum(y[h - r:] - r, 0)]
+    inner = h - 2 * r  # windows y - r .. y + r wholly inside
+    if inner > 0:
+        n = 2 * r + 1
+        table, span = a, 1
+        while 2 * span <= n:  # table[i] = max(a[i : i + 2 * span])
+            table = np.maximum(table[:-span], table[span:])
+            span *= 2
+        out[r:h - r] = np.maximum(table[:inner], table[n - span:n - span + inner])
     return out
 
 

@@ -385,3 +385,13 @@ def test_splat_rows_is_the_bound_over_the_rows_within_reach():
                     assert got[u, v, y] == (bound > SPLAT_TOLERANCE_PX and (du > 0 or dv > 0)), (u, v, y)
     assert not got[2, 3].any()
     assert got.any() and not got.all(axis=-1)[got.any(axis=-1)].all()
+
+
+def test_window_maxima_clip_at_the_ends(rng):
+    from lfstream.codec.warp import _window_max
+
+    for h in (1, 2, 5, 40):
+        a = rng.random(h)
+        for r in (0, 1, 3, h - 1, h + 5):
+            want = [a[max(0, y - r):y + r + 1].max() for y in range(h)]
+            np.testing.assert_array_equal(_window_max(a, r), want)
