@@ -508,7 +508,7 @@ def splat_all_views(disp, offsets, splat, reach, out):  # pragma: no cover - com
                 dview[y] = disp[y]
 
 
-@numba.njit(**_ROW)
+@numba.njit(**_PARALLEL)
 def row_fold_bounds(disp, rx, ry):  # pragma: no cover - compiled
     """:func:`fold_bounds` per row: ``rx[y]`` the largest ``|d(y, x+1) - d(y, x)| *
     max(|d(y, x)|, |d(y, x+1)|)`` of row ``y``, ``ry[y]`` the same between rows ``y`` and
@@ -518,7 +518,7 @@ def row_fold_bounds(disp, rx, ry):  # pragma: no cover - compiled
         disp: (H, W) float32; rx, ry: (H,) float32, overwritten.
     """
     h, w = disp.shape
-    for y in range(h):
+    for y in numba.prange(h):  # rows are independent: the same values at any thread count
         row = disp[y]
         mx = np.float32(0.0)
         for x in range(w - 1):
