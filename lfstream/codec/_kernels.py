@@ -428,12 +428,7 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, spla
     # for every pixel, whatever d), one on its column at x exactly: two taps suffice
     taps = _TAPS_ROW if du == 0 else (_TAPS_COLUMN if dv == 0 else _TAPS_ALL)
     rows = splat[u, v]
-    splatted = False
-    if not (du == 0 and dv == 0) and not per_view:
-        for y in range(h):
-            if rows[y]:
-                splatted = True
-                break
+    splatted = not (du == 0 and dv == 0) and not per_view and rows.any()
     if splatted:
         _splat_view(disp, cols, du, dv, dview, targets, rows, reach[u, v], counts)
     # the gain map up-sampled along x once per view (gh rows); each image row then

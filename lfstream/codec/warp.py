@@ -131,17 +131,17 @@ def _splat_plan(d: np.ndarray, offsets: np.ndarray, tolerance: float) -> tuple[n
     h = d.shape[0]
     rx, ry = np.empty(h, np.float32), np.empty(h, np.float32)
     row_fold_bounds(read_only(d), rx, ry)
-    dmax = float(np.abs(d).max(initial=0.0))
-    return _rows_from_bounds(rx, ry, dmax, offsets, tolerance), splat_reach(dmax, offsets)
+    reach = splat_reach(float(np.abs(d).max(initial=0.0)), offsets)
+    return _rows_from_bounds(rx, ry, reach, offsets, tolerance), reach
 
 
-def _rows_from_bounds(rx: np.ndarray, ry: np.ndarray, dmax: float, offsets: np.ndarray,
+def _rows_from_bounds(rx: np.ndarray, ry: np.ndarray, reach: np.ndarray, offsets: np.ndarray,
                       tolerance: float) -> np.ndarray:
-    """:func:`splat_rows` from the per-row fold bounds and ``max|d|`` (shared with the
-    batched torch warp, which computes the same float32 bounds on its device)."""
+    """:func:`splat_rows` from the per-row fold bounds and the views' :func:`splat_reach`
+    (shared with the batched torch warp, which computes the same float32 bounds on its
+    device)."""
     off = np.asarray(offsets, np.float64)
     du, dv = np.abs(off[..., 0]), np.abs(off[..., 1])
-    reach = splat_reach(dmax, offsets)
     rx64, ry64 = np.asarray(rx, np.float64), np.asarray(ry, np.float64)
     out = np.zeros((*off.shape[:-1], rx64.shape[0]), bool)
     moving = (du > 0) | (dv > 0)

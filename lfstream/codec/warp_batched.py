@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from lfstream.codec import warp as _warp
-from lfstream.codec.warp import _check_views, _linear_taps, _rows_from_bounds
+from lfstream.codec.warp import _check_views, _linear_taps, _rows_from_bounds, splat_reach
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import view_offsets
 
@@ -90,22 +90,6 @@ def _row_fold_bounds(d: torch.Tensor) -> torch.Tensor:
         a, c = d[..., :-1, :], d[..., 1:, :]
         out[:, 1, :-1] = ((c - a).abs() * torch.maximum(a.abs(), c.abs())).amax(dim=-1)[:, 0]
     return out
-
-
-def _fold_bounds(d: torch.Tensor) -> torch.Tensor:
-    """Per frame ``(M_x, M_y)`` of the centre maps ``d`` (B, 1, H, W), as
-    :func:`lfstream.codec._kernels.fold_bounds` computes them (the same float32 operations,
-    each rounded once, so the same values).
-
-    Shape:
-        - output: ``(B, 2)`` float32
-    """
-    def along(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-        if a.numel() == 0:
-            return torch.zeros(d.shape[0], dtype=torch.float32, device=d.device)
-        return ((b - a).abs() * torch.maximum(a.abs(), b.abs())).flatten(1).amax(dim=1)
-
-    return torch.stack([along(d[..., :-1], d[..., 1:]), along(d[..., :-1, :], d[..., 1:, :])], dim=1)
 
 
 def _fill_holes(maps: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
@@ -236,13 +220,16 @@ def warp_views_batched(
         rows, row_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(h, gains.shape[3]))
         cols, col_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(w, gains.shape[4]))
         gains = gains.reshape(b, u * v, *gains.shape[3:])
-    splat = splat_host = splat_rows = None  # (B, U*V) bool: the views each frame splats (on the device; on the host)
+    # (B, U*V) bool, the views each frame splats (on the device; on the host), and (B, U*V, H)
+    # bool, their rows (on the device)
+    splat = splat_host = splat_rows = None
     if occlusion and view_disparities is None:
         # the rows each view splats (lfstream.codec.warp.splat_rows), decided on the host from
         # the same float32 bounds as the CPU kernel's; the splat itself runs over every row
         bounds = _row_fold_bounds(d).cpu().numpy()
         dmax = d.abs().flatten(1).amax(dim=1).cpu().numpy()
-        rows_host = np.stack([_rows_from_bounds(bd[0], bd[1], float(m), grid_offsets, _warp.SPLAT_TOLERANCE_PX)
+        rows_host = np.stack([_rows_from_bounds(bd[0], bd[1], splat_reach(float(m), grid_offsets), grid_offsets,
+                                                _warp.SPLAT_TOLERANCE_PX)
                               for bd, m in zip(bounds, dmax)]).reshape(b, u * v, h)
         splat_host = rows_host.any(axis=-1)
         splat = torch.from_numpy(splat_host).to(dev)
