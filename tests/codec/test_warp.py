@@ -325,19 +325,19 @@ def test_splat_views_is_the_documented_bound(amplitude):
     assert splat_views(d, offsets, tolerance=0.0).sum() == (35 - 1 if amplitude > 0 else 0)
     if amplitude == 0.0:
         assert not got.any()
-    if amplitude == 2.5:
-        assert got.sum() == 34  # a strong slope and a step: every view but the centre
+    if amplitude == 2.5:  # a strong slope and a step: every view but the centre at a quarter pixel, some at one
+        assert splat_views(d, offsets, tolerance=0.25).sum() == 34 and 0 < got.sum() < 34
 
 
 def test_views_without_the_splat_are_the_splatted_views_within_the_tolerance(monkeypatch):
-    """Where splat_rows skips a view row, its samples are at most a quarter pixel from the
-    splatted ones' (plus the splat's own nearest-pixel rounding): on a textured centre with a
-    gentle disparity the decoded rows differ from splatting every row by under a level on
-    average, the splatted rows are the same bytes, and the rule leaves strong parallax alone
-    (skipping those rows too moves them over three times as much)."""
+    """Where splat_rows skips a view row, its samples are at most the tolerance (one pixel)
+    from the splatted ones' (plus the splat's own nearest-pixel rounding): on a textured
+    centre with a gentle disparity the decoded rows differ from splatting every row by under
+    a level on average, the splatted rows are the same bytes, and the rule leaves strong
+    parallax alone (skipping those rows too moves them over three times as much)."""
     clip = synth_clip(1, 7, (60, 84), seed=4, layers=1, motion=0, camera_pan=0)
     centre = clip.lf[0, 3, 3]
-    d = _smooth_disparity(60, 84, 0.8)
+    d = _smooth_disparity(60, 84, 1.6)
     offsets = view_offsets((7, 7))
     mask = splat_rows(d, offsets)
     views = splat_views(d, offsets)
@@ -350,9 +350,10 @@ def test_views_without_the_splat_are_the_splatted_views_within_the_tolerance(mon
     everywhere = warp_views(centre, d, (7, 7))
     diff = np.abs(got.astype(int) - everywhere.astype(int))
     assert np.array_equal(got[mask], everywhere[mask])  # splatted rows: the same bytes
-    # measured: mean 0.12 levels, 99th percentile 1 (a texture edge moved by a fraction of
-    # a pixel makes the rare larger difference)
-    assert diff[~mask].mean() < 0.25 and np.percentile(diff[~mask], 99) <= 2
+    # measured: mean 0.53 levels, 99th percentile 5 (a sharp texture edge moved by a
+    # fraction of a pixel makes the rare larger difference; at a quarter-pixel tolerance and
+    # half this amplitude: 0.12 and 1)
+    assert diff[~mask].mean() < 0.75 and np.percentile(diff[~mask], 99) <= 6
     monkeypatch.setattr(warp_module, "SPLAT_TOLERANCE_PX", np.inf)
     none = np.abs(warp_views(centre, d, (7, 7)).astype(int) - everywhere.astype(int))
     assert none[mask].mean() > 3 * diff[~mask].mean()
