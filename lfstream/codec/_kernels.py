@@ -100,7 +100,7 @@ def _floor_int(t, offset):  # pragma: no cover - compiled
     return np.int32(min(max(t, np.float32(1.0) - offset), np.float32(1.0e9)) + offset) - np.int32(offset)
 
 
-@numba.njit(**_ROW)
+@numba.njit(**_PARALLEL)
 def pack_lanes(img, ch0, n_ch, packed):  # pragma: no cover - compiled
     """``packed[(y + 1) * (W + 2) + x + 1]`` = channels ch0 .. ch0 + n_ch - 1 of ``img[y, x]``
     in 21-bit lanes, with a border of one replicated pixel all round: a bilinear tap at a
@@ -108,7 +108,8 @@ def pack_lanes(img, ch0, n_ch, packed):  # pragma: no cover - compiled
     taps to ``[0, W - 1]`` would, so a sample needs one index instead of four.
 
     A row's interior is packed one channel at a time (loops that vectorise; a clamped
-    loop over every padded pixel took 6 ns a pixel), then its two border pixels copied.
+    loop over every padded pixel took 6 ns a pixel), then its two border pixels copied; rows
+    in parallel (0.47 -> 0.25 ms a 512 x 512 view on two threads).
 
     Args:
         img: (H, W, C) uint8; packed: ((H + 2) * (W + 2),) uint64, overwritten.
@@ -116,7 +117,7 @@ def pack_lanes(img, ch0, n_ch, packed):  # pragma: no cover - compiled
     h, w, c = img.shape
     w2 = w + 2
     flat = img.reshape(h, w * c)
-    for yy in range(h + 2):
+    for yy in numba.prange(h + 2):  # independent rows
         row = flat[min(max(yy - 1, 0), h - 1)]
         dst = packed[yy * w2 + 1: yy * w2 + 1 + w]
         for x in range(w):

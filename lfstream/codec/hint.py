@@ -933,7 +933,8 @@ def _expand(qh: QuantisedHint, size: tuple[int, int], guide: np.ndarray | None) 
                             interpolation=cv2.INTER_AREA)
         full = np.empty(size, np.float32)
         joint_upsample(small, gsmall, np.ascontiguousarray(gray), np.float32(qh.scale), _RANGE_LUT, full)
-    return np.clip(full, qh.lo, max(qh.hi, qh.lo)).astype(np.float32)
+    full = np.asarray(full, np.float32)
+    return np.clip(full, np.float32(qh.lo), np.float32(max(qh.hi, qh.lo)), out=full)  # in place: a fresh map
 
 
 def decode_hint(data: bytes, size: tuple[int, int], guide: np.ndarray | None = None, frame: int | None = None) -> np.ndarray:
