@@ -344,3 +344,30 @@ def test_half_views_code_the_views_at_half_size(unpredictable):
     assert max(mpsnr(out_full, lf) - 9.0, 20.0) < mpsnr(out, lf) < mpsnr(out_full, lf)
     with pytest.raises(LFValueError, match="half size"):
         encode_residual(lf, lf, 30, half=True)
+
+
+def test_threaded_residual_decode_matches_one_thread(monkeypatch):
+    """dav1d's worker threads (frame threading across the views) give the single-threaded
+    decode's planes to the bit, keyed and not, and a payload damaged in its last packets is
+    decoded or refused, never left pending (the decoder drained before it is freed)."""
+    from lfstream.codec import residual as res
+
+    lf8 = synth_clip(1, 5, (64, 96), seed=5, noise=2.0).lf[0]
+    plain = encode_residual(lf8, None, 40, 12)
+    centre, keyed = res.encode_views_keyed(lf8, 40, 12)
+    monkeypatch.setattr(res, "_DECODER_THREADS", 1)
+    ref_plain = res.decode_residual(plain, (5, 5), (64, 96))
+    ref_keyed = res.decode_residual(keyed, (5, 5), (64, 96), centre=centre)
+    monkeypatch.setattr(res, "_DECODER_THREADS", 4)
+    np.testing.assert_array_equal(res.decode_residual(plain, (5, 5), (64, 96)), ref_plain)
+    np.testing.assert_array_equal(res.decode_residual(keyed, (5, 5), (64, 96), centre=centre), ref_keyed)
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        buf = bytearray(plain)
+        for i in rng.integers(len(buf) * 3 // 4, len(buf), 3):
+            buf[i] ^= 1 << int(rng.integers(0, 8))
+        try:
+            out = res.decode_residual(bytes(buf), (5, 5), (64, 96), frame=4)
+            assert out.shape == ref_plain.shape
+        except BitstreamError as exc:
+            assert "frame 4" in str(exc)
