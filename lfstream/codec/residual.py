@@ -278,7 +278,7 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
         packets.append(data[pos:pos + n])
         pos += n
     ctx = av.CodecContext.create("libdav1d", "r")
-    # Worker threads (toys_array's 80 views: 94 -> 74 ms a frame on two cores). A test-suite
+    # Worker threads (toys_array's default decode 58.5 -> 52.5 ms on two cores, bench/ab.py). A test-suite
     # run once hung with dav1d's workers parked on futexes while a sequence was torn down:
     # the decoder was then freed with frames in flight (a loop that stopped early, without a
     # flush). So nothing is left in flight on any way out: every packet decoded and the
