@@ -40,23 +40,32 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from lfstream.errors import LFStreamError
     from lfstream.io._fs import fresh_dir, prepare_output_dir
     from lfstream.stream import Pipeline, Source, file_source, synthetic_source
     from lfstream.stream.report import stopped_summary
     from lfstream.stream.transport import TcpSender, parse_address
 
     _pipeline.check_output_folder(args.output)
-    sender, out = None, None
+    sender, out, created = None, None, False
     if args.to:
         sender = TcpSender(*parse_address(args.to))
     else:
         # the folder first: a Ctrl-C at any moment after this still leaves a labelled summary
-        out = prepare_output_dir(args.output or fresh_dir("lfstream-out"))
+        target = Path(args.output or fresh_dir("lfstream-out"))
+        created = not target.exists()
+        out = prepare_output_dir(target)
     try:
-        if args.input is None:
-            source = Source(synthetic_source(frames=args.frames), None, None, args.frames)
-        else:
-            source = file_source(args.input, read_options(args))
+        try:
+            if args.input is None:
+                source = Source(synthetic_source(frames=args.frames), None, None, args.frames)
+            else:
+                source = file_source(args.input, read_options(args))
+        except LFStreamError:
+            # an input refused before anything ran: the folder this run made goes too (still empty)
+            if created and not any(out.iterdir()):
+                out.rmdir()
+            raise
         cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp, depth_hint=not args.no_depth_hint,
                                         preset=args.preset, residual=args.residual,
                                         residual_mode=args.residual_mode, transport=args.transport,

@@ -230,6 +230,19 @@ def test_stream_output_with_an_extension_is_refused(capsys, tmp_path):
     assert not (tmp_path / "out.xyz").exists()
 
 
+def test_stream_refusing_its_input_leaves_no_output_folder(capsys, tmp_path, monkeypatch):
+    """An input refused before the pipeline runs removes the folder that run made (empty);
+    a folder the user named and made stays."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "nothing").mkdir()
+    code, _, err = run(capsys, "stream", "nothing")
+    assert code == 2 and "empty folder" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "lfstream-out").exists()
+    (tmp_path / "mine").mkdir()
+    code, _, err = run(capsys, "stream", "nothing", "-o", "mine")
+    assert code == 2 and (tmp_path / "mine").is_dir()
+
+
 def test_baseline_metrics_count_present_views_only(capsys, tmp_path):
     """A folder with missing views: the zero-filled stand-ins code perfectly (56 dB measured
     before) and must not count; the score is the one over the views that exist."""
