@@ -56,6 +56,11 @@ def test_a_broken_input_fails_alone_and_nothing_is_overwritten(videos, tmp_path,
     assert sorted(p.name for p in out.iterdir()) == ["clip1.lfs"]  # no partial file for the broken one
     again = batch([paths[1]], out)
     assert not again.ok and "already exists" in again.files[0].error
+    assert (out / "clip1.lfs").exists()  # the folder it did not make, and what is in it, stay
+    # every input failed: the folder the call made is removed (nothing in it); one the user made stays
+    assert not batch([bad], tmp_path / "none").ok and not (tmp_path / "none").exists()
+    (tmp_path / "mine").mkdir()
+    assert not batch([bad], tmp_path / "mine").ok and (tmp_path / "mine").is_dir()
 
 
 def test_decode_mode_reassembles_frames_in_order(videos, tmp_path):

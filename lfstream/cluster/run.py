@@ -158,7 +158,8 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
 
     Args:
         inputs: LF videos or light fields in any readable format (encode), ``.lfs`` (decode).
-        output: the output folder (created; existing files are kept unless ``overwrite``).
+        output: the output folder (created, and removed again, empty, where every input
+            failed; existing files are kept unless ``overwrite``).
         engine: ``"local"`` (this process) or ``"ray"``.
         address: a running Ray cluster (``ray start --head`` prints it); default: a local
             cluster started and stopped by this call.
@@ -180,6 +181,7 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
     if engine == "ray":
         _ray()  # fail early with the install hint
     t0 = time.perf_counter()
+    created = not Path(output).exists()
     out_dir = prepare_output_dir(output, overwrite=True)
     read = read or ReadOptions()
     report = BatchReport(engine=engine, workers=1, mode=mode)
@@ -252,6 +254,8 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
             res.status = "ok"
         except LFStreamError as exc:
             res.status, res.error = "failed", f"{res.input}: {exc}"
+    if created and not any(f.status == "ok" for f in report.files) and not any(out_dir.iterdir()):
+        out_dir.rmdir()  # every input failed: the folder this call made goes too (still empty)
     report.wall_s = time.perf_counter() - t0
     return report
 
