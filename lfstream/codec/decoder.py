@@ -23,7 +23,7 @@ from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, Limits, Packet, Stre
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
 from lfstream.codec.jpeg import post_filter_jpeg
-from lfstream.codec.residual import VIEW_MODES, apply_residual, residual_mode
+from lfstream.codec.residual import VIEW_MODES, apply_residual, decode_residual, residual_mode
 from lfstream.codec.shading import GainDecoder, GainReferenceError
 from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.errors import BitstreamError, LFFileError, LFValueError
@@ -193,11 +193,29 @@ class Decoder:
         to predict (the warp is skipped) and nothing the settings could leave out."""
         return residual_mode(packet.residual) in VIEW_MODES
 
-    def _add_residual(self, packet: Packet, frame: DecodedFrame) -> DecodedFrame:
-        if packet.residual and (self.applies_residual or self._views_only(packet)):
-            # a views sequence may start with the centre payload's key frame (format 4)
-            centre = packet.image if self.header.codec == CODEC_AV1 else None
-            apply_residual(frame.lf, packet.residual, packet.seq, centre)
+    def _residual_applies(self, packet: Packet) -> bool:
+        return bool(packet.residual) and (self.applies_residual or self._views_only(packet))
+
+    def _residual_centre(self, packet: Packet) -> bytes | None:
+        """What a views sequence may start with: the centre payload's key frame (format 4)."""
+        return packet.image if self.header.codec == CODEC_AV1 else None
+
+    def _start_residuals(self, packets: list[Packet]) -> list:
+        """Each packet's residual layer decoding (dav1d) on a worker thread, started before the
+        centre view, the hint and the warp, which it does not depend on (``None`` where none
+        is applied)."""
+        from lfstream.codec.watchdog import in_background
+
+        return [in_background(lambda p=p: decode_residual(p.residual, self.header.views, self.header.size, p.seq,
+                                                          self._residual_centre(p)))
+                if self._residual_applies(p) else None for p in packets]
+
+    def _add_residual(self, packet: Packet, frame: DecodedFrame, planes=None) -> DecodedFrame:
+        """``frame`` with the packet's residual layer where it applies; ``planes``: its
+        decoding started by :meth:`_start_residuals` (a future), else decoded here."""
+        if self._residual_applies(packet):
+            apply_residual(frame.lf, packet.residual, packet.seq, self._residual_centre(packet),
+                           planes=None if planes is None else planes.result())
         elif packet.residual:
             self.residual_skipped += 1
         return frame
@@ -285,6 +303,7 @@ class Decoder:
         if not packets:
             return []
         h, w = self.header.size
+        residuals = self._start_residuals(packets) if self._depth_net is None else [None] * len(packets)
         if centres is None:
             centres = self.decode_centres(packets)
         hints: list[np.ndarray | None] = []
@@ -301,7 +320,7 @@ class Decoder:
             frames = self._warp_on_device(packets, centres, disparities, axes) if self.warps_on_device else None
             if frames is None:
                 frames = [self._warp(p, centre, d, a) for p, centre, d, a in zip(packets, centres, disparities, axes)]
-            return [self._add_residual(p, frame) for p, frame in zip(packets, frames)]
+            return [self._add_residual(p, frame, r) for p, frame, r in zip(packets, frames, residuals)]
         self.residual_skipped += sum(1 for p in packets if p.residual)
         from lfstream.models.depth_net import predict_view_disparities
 

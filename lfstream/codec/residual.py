@@ -306,11 +306,14 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
     return planes
 
 
-def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None, centre: bytes | None = None) -> np.ndarray:
+def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None, centre: bytes | None = None,
+                   planes: np.ndarray | None = None) -> np.ndarray:
     """``lf`` (the prediction the residual was computed against) with the residual added,
     in place (one fused pass: YCbCr to RGB, offset, saturation); a ``views`` residual
     replaces every view but the centre instead. Returns ``lf``. ``centre``: the packet's
-    centre payload (:func:`decode_residual`).
+    centre payload (:func:`decode_residual`); ``planes``: what :func:`decode_residual`
+    gives for ``data``, where the caller decoded it already (the decoder does, beside the
+    warp).
 
     Shape:
         - lf: ``(U, V, H, W, 3)`` uint8
@@ -318,7 +321,8 @@ def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None, centre
     from lfstream.codec._kernels import add_i420_residual
 
     u, v, h, w, _ = lf.shape
-    planes = decode_residual(data, (u, v), (h, w), frame, centre)
+    if planes is None:
+        planes = decode_residual(data, (u, v), (h, w), frame, centre)
     positions = np.array(residual_views((u, v)), np.int64)
     mode = residual_mode(data)
     if mode == "half-views":  # small views: converted, then up-sampled
