@@ -869,9 +869,14 @@ def _i420_residual_row(dst_row, flat, y, height, width, offset, store, vcb, vcr,
         near, far = m, max(m - 1, 0)
     near *= cw
     far *= cw
+    # the rows as slices, indexed by the loop counter: an index the compiler cannot prove
+    # non-negative (flat[cb0 + near + n]) keeps numba's wrap-around test in the loop, which
+    # stopped it vectorising (the whole row 2.2x slower, the same values)
+    cb_near, cb_far = flat[cb0 + near:cb0 + near + cw], flat[cb0 + far:cb0 + far + cw]
+    cr_near, cr_far = flat[cr0 + near:cr0 + near + cw], flat[cr0 + far:cr0 + far + cw]
     for n in range(cw):  # the vertical blend once per chroma column
-        vcb[n] = 3 * np.int32(flat[cb0 + near + n]) + np.int32(flat[cb0 + far + n])
-        vcr[n] = 3 * np.int32(flat[cr0 + near + n]) + np.int32(flat[cr0 + far + n])
+        vcb[n] = 3 * np.int32(cb_near[n]) + np.int32(cb_far[n])
+        vcr[n] = 3 * np.int32(cr_near[n]) + np.int32(cr_far[n])
     # horizontal: output column 2n takes chroma columns n (3/4) and n-1, 2n+1 takes n and
     # n+1, clamped at the ends
     hcb[0] = ((4 * vcb[0] + 8) >> 4) - 128
@@ -884,22 +889,27 @@ def _i420_residual_row(dst_row, flat, y, height, width, offset, store, vcb, vcr,
     hcb[2 * cw - 1] = ((4 * vcb[cw - 1] + 8) >> 4) - 128
     hcr[2 * cw - 1] = ((4 * vcr[cw - 1] + 8) >> 4) - 128
     half = np.int32(1 << (_YCC_BITS - 1))
-    row0 = y * width
     w = dst_row.shape[0] // 3
+    luma_row = flat[y * width:y * width + w]
+    r, g, b = rgb[0], rgb[1], rgb[2]
     for x in range(w):
-        luma = np.int32(flat[row0 + x])
-        rgb[0, x] = _clip_u8(luma + ((_CR_R * hcr[x] + half) >> _YCC_BITS))
-        rgb[1, x] = _clip_u8(luma + ((half - _CR_G * hcr[x] - _CB_G * hcb[x]) >> _YCC_BITS))
-        rgb[2, x] = _clip_u8(luma + ((_CB_B * hcb[x] + half) >> _YCC_BITS))
+        luma = np.int32(luma_row[x])
+        r[x] = _clip_u8(luma + ((_CR_R * hcr[x] + half) >> _YCC_BITS))
+        g[x] = _clip_u8(luma + ((half - _CR_G * hcr[x] - _CB_G * hcb[x]) >> _YCC_BITS))
+        b[x] = _clip_u8(luma + ((_CB_B * hcb[x] + half) >> _YCC_BITS))
+    one, two = np.uint32(1), np.uint32(2)
     if store:
         for x in range(w):
-            dst_row[3 * x] = np.uint8(rgb[0, x])
-            dst_row[3 * x + 1] = np.uint8(rgb[1, x])
-            dst_row[3 * x + 2] = np.uint8(rgb[2, x])
+            k = np.uint32(3 * x)  # unsigned: no wrap-around test in the loop
+            dst_row[k] = np.uint8(r[x])
+            dst_row[k + one] = np.uint8(g[x])
+            dst_row[k + two] = np.uint8(b[x])
     else:  # branch-free saturation (random residual signs made branches cost 2x)
         for x in range(w):
-            for c in range(3):
-                dst_row[3 * x + c] = np.uint8(_clip_u8(np.int32(dst_row[3 * x + c]) + rgb[c, x] - offset))
+            k = np.uint32(3 * x)
+            dst_row[k] = np.uint8(_clip_u8(np.int32(dst_row[k]) + r[x] - offset))
+            dst_row[k + one] = np.uint8(_clip_u8(np.int32(dst_row[k + one]) + g[x] - offset))
+            dst_row[k + two] = np.uint8(_clip_u8(np.int32(dst_row[k + two]) + b[x] - offset))
 
 
 _I420_ROWS = 16  # rows per parallel job (one set of scratch rows each)
