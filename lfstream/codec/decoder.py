@@ -204,8 +204,10 @@ class Decoder:
         """Each packet's residual layer decoding (dav1d) on a worker thread, started before the
         centre view, the hint and the warp, which it does not depend on (``None`` where none
         is applied)."""
-        from lfstream.codec.watchdog import in_background
+        from lfstream.codec.watchdog import in_background, on_worker_thread
 
+        if on_worker_thread():  # decoded inline there: a worker must not wait on the pool
+            return [None] * len(packets)
         return [in_background(lambda p=p: decode_residual(p.residual, self.header.views, self.header.size, p.seq,
                                                           self._residual_centre(p)))
                 if self._residual_applies(p) else None for p in packets]

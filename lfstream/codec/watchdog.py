@@ -71,6 +71,13 @@ def in_background(fn: Callable[[], T]) -> Future:
     return _background.submit(fn)
 
 
+def on_worker_thread() -> bool:
+    """Whether the caller runs on one of :func:`in_background`'s worker threads, where it
+    must not submit more work and wait for it (two busy workers waiting on each other's
+    queue would never finish)."""
+    return threading.current_thread().name.startswith("lfstream-worker")
+
+
 def call_with_deadline(fn: Callable[[], T], timeout_s: float, what: str, attempts: int = ATTEMPTS) -> T:
     """Runs ``fn()`` on a daemon thread and returns its result, re-running it from the start
     when it has not returned within ``timeout_s``.
@@ -103,5 +110,5 @@ def call_with_deadline(fn: Callable[[], T], timeout_s: float, what: str, attempt
                               f"({attempts} attempts; a third-party encoder deadlock)")
 
 
-__all__ = ["in_background", "BASE_DEADLINE_S", "DEADLINE_S_PER_PIXEL", "ATTEMPTS", "EncoderStalledError", "encoder_deadline",
-           "call_with_deadline"]
+__all__ = ["in_background", "on_worker_thread", "BASE_DEADLINE_S", "DEADLINE_S_PER_PIXEL", "ATTEMPTS",
+           "EncoderStalledError", "encoder_deadline", "call_with_deadline"]

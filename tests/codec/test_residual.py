@@ -371,3 +371,17 @@ def test_threaded_residual_decode_matches_one_thread(monkeypatch):
             assert out.shape == ref_plain.shape
         except BitstreamError as exc:
             assert "frame 4" in str(exc)
+
+
+def test_residual_streams_decode_the_same_from_the_worker_threads(coded):
+    """The decoder decodes a packet's residual on a worker thread beside the warp; called
+    from those workers themselves (both busy at once) it decodes inline instead of waiting
+    on their queue, and every result is the same."""
+    from lfstream.codec.watchdog import in_background, on_worker_thread
+
+    expected = decode(coded)
+    jobs = [in_background(lambda: (on_worker_thread(), decode(coded))) for _ in range(4)]
+    for job in jobs:
+        on_worker, out = job.result(timeout=60)
+        assert on_worker and np.array_equal(out, expected)
+    assert not on_worker_thread()
