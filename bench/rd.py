@@ -11,12 +11,13 @@ HCI "star" scenes as their centre 3x3, the only complete square of views they ha
 - x265 preset medium and preset ultrafast, and SVT-AV1 (presets 8 and 4), each coding the views as
   one pseudo-sequence (raster order, one key frame) over a sweep of constant QP / CRF.
 
-Per point: bpp, MPSNR, MSSIM, encode and decode seconds (one timed run after the first;
-the same harness and metric code for every method). Per scene: BD-rate on MPSNR and on
-MSSIM and BD-PSNR of every method against x265 medium (piecewise cubic over the
-overlapping range, lfstream.metrics.bd_rate); every lfstream point's encode speed against
-x265 medium's median encode in the same run (the rate-distortion issue's speed target at
-every T); one PNG with both curves.
+Per point: bpp, MPSNR, MSSIM, encode seconds (one timed run after a warm-up) and decode
+seconds (the median of --runs, default 5); the same harness and metric code for every
+method. Per scene: BD-rate on MPSNR and on MSSIM and BD-PSNR of every method against x265
+medium (piecewise cubic over the overlapping range, lfstream.metrics.bd_rate); every
+lfstream point's encode speed against x265 medium's median encode in the same run (the
+rate-distortion issue's speed target at every T) and its decode speed against x265
+medium's decode at the same bpp; one PNG with both curves.
 
     python bench/rd.py [--json [FILE]] [--quick] [--scenes NAME,...] [--png-dir DIR]
 """
@@ -74,6 +75,18 @@ def _timed(fn):
     return out, time.perf_counter() - t0
 
 
+#: decodes timed per point (the median; --runs): a decode takes milliseconds, and one timed
+#: run moved by up to a third between neighbouring points of the same curve
+DECODE_RUNS = [5]
+
+
+def _timed_decode(fn):
+    """``fn()``'s result and the median of :data:`DECODE_RUNS` timed calls."""
+    out, t = _timed(fn)
+    times = [t] + [_timed(fn)[1] for _ in range(DECODE_RUNS[0] - 1)]
+    return out, float(np.median(times))
+
+
 def _point(lf: np.ndarray, data: bytes, rec: np.ndarray, param, enc_s: float, dec_s: float) -> dict:
     return {"param": param, "bytes": len(data), "bpp": bpp(len(data), lf.shape), "mpsnr": capped(mpsnr(lf, rec)),
             "mssim": float(mssim(lf, rec)), "encode_s": enc_s, "decode_s": dec_s}
@@ -84,7 +97,7 @@ def lfstream_curve(lf: np.ndarray, preset: str | None, quick: bool) -> list[dict
     for q in QUALITIES[::2] if quick else QUALITIES:
         lfstream.encode(lf, quality=q, preset=preset)  # warm (kernels, codec libraries)
         data, t_enc = _timed(lambda: lfstream.encode(lf, quality=q, preset=preset))
-        rec, t_dec = _timed(lambda: lfstream.decode(data)[0])
+        rec, t_dec = _timed_decode(lambda: lfstream.decode(data)[0])
         pts.append(_point(lf, data, rec, q, t_enc, t_dec))
     return pts
 
@@ -97,7 +110,7 @@ def rate_control_curve(lf: np.ndarray, quick: bool, preset: str | None = None) -
     pts = []
     for target in TARGETS[1:5] if quick else TARGETS:
         data, t_enc = _timed(lambda: lfstream.encode(lf, bpp=target, preset=preset))
-        rec, t_dec = _timed(lambda: lfstream.decode(data)[0])
+        rec, t_dec = _timed_decode(lambda: lfstream.decode(data)[0])
         header = split_stream(data)[0]
         p = _point(lf, data, rec, target, t_enc, t_dec)
         p.update({"target_bpp": target, "preset": header.meta.get("preset", "fast"), "quality": header.quality,
@@ -112,7 +125,7 @@ def baseline_curve(lf: np.ndarray, codec: str, preset: str, params) -> list[dict
     pts = []
     for q in params:
         data, t_enc = _timed(lambda: encode_views(lf, codec, q, constant_qp=True, preset=preset))
-        rec, t_dec = _timed(lambda: decode_views(data, codec, lf.shape[:2], lf.shape[2:4]))
+        rec, t_dec = _timed_decode(lambda: decode_views(data, codec, lf.shape[:2], lf.shape[2:4]))
         pts.append(_point(lf, data, rec, q, t_enc, t_dec))
     return pts
 
@@ -122,6 +135,17 @@ def encode_speed(curves: dict[str, list[dict]]) -> dict[str, list[float]]:
     point's encode time (the speed target's ratio, measured in the same run: > 1 is faster)."""
     anchor = float(np.median([p["encode_s"] for p in curves[ANCHOR]]))
     return {m: [anchor / max(p["encode_s"], 1e-9) for p in c] for m, c in curves.items() if m.startswith("lfstream")}
+
+
+def decode_speed(curves: dict[str, list[dict]]) -> dict[str, list[float]]:
+    """Per lfstream curve, x265 medium's decode time at each point's bpp (interpolated in
+    log-bpp along its curve; its nearest end outside it) divided by the point's decode time
+    (the rate-distortion issue's decode target at every T: > 1 is faster)."""
+    anchor = sorted(curves[ANCHOR], key=lambda p: p["bpp"])
+    xs = np.log([p["bpp"] for p in anchor])
+    ys = [p["decode_s"] for p in anchor]
+    return {m: [float(np.interp(np.log(p["bpp"]), xs, ys)) / max(p["decode_s"], 1e-9) for p in c]
+            for m, c in curves.items() if m.startswith("lfstream")}
 
 
 def bjontegaard(curves: dict[str, list[dict]]) -> dict[str, dict]:
@@ -190,6 +214,7 @@ def main(argv=None) -> dict:
     p.add_argument("--skip-presets", action="store_true",
                    help="leave out the fixed-preset lfstream curves (rate control and the baselines only)")
     args = p.parse_args(argv)
+    DECODE_RUNS[0] = max(1, 1 if args.quick else args.runs)
     only = set(args.scenes.split(",")) if args.scenes else None
     results = []
     for name, lf in scenes(args.quick, only):
@@ -201,14 +226,18 @@ def main(argv=None) -> dict:
             curves[method] = baseline_curve(lf, codec, preset, params)
         bd = bjontegaard(curves)
         speed = encode_speed(curves)
+        dspeed = decode_speed(curves)
         results.append({"scene": name, "shape": list(lf.shape), "curves": curves, "bjontegaard_vs_x265_medium": bd,
-                        "encode_speed_vs_x265_medium": speed})
+                        "encode_speed_vs_x265_medium": speed, "decode_speed_vs_x265_medium": dspeed})
         plot(name, curves, args.png_dir / f"rd_{name}.png")
         for method, row in bd.items():
             cells = [f"{k} {v:+7.1f}" if v is not None else f"{k}    n/a" for k, v in row.items() if k != "why"]
             print(f"{name:18s} {method:30s} " + "  ".join(cells), flush=True)
         for method, ratios in speed.items():
             print(f"{name:18s} {method:30s} encode speed vs x265 medium (its median encode), per point: "
+                  + " ".join(f"{r:.2f}x" for r in ratios), flush=True)
+        for method, ratios in dspeed.items():
+            print(f"{name:18s} {method:30s} decode speed vs x265 medium at the same bpp, per point: "
                   + " ".join(f"{r:.2f}x" for r in ratios), flush=True)
     return emit(args, results)
 
