@@ -966,15 +966,23 @@ def gain_samples(lf, ys, xs, d_samples, offsets, scale, out):  # pragma: no cove
     hi_y = np.float32(h - 1)
     hi_x = np.float32(w - 1)
     zero = np.float32(0.0)
+    n_x = xs.shape[0]
+    uw, uc = np.uint64(w), np.uint64(c)
     for k in numba.prange(n_u * n_v):
         a, b = k // n_v, k % n_v
         oy = offsets[a, b, 0]
         ox = offsets[a, b, 1]
-        view = lf[a, b]
+        # flat rows and unsigned indices: numba's wrap-around test on each of the three
+        # signed indices of view[sy, sx, ch] cost most of the kernel (the same samples)
+        view = lf[a, b].reshape(h * w * c)
         for i in range(n_y):
-            for j in range(xs.shape[0]):
-                dd = d_samples[i, j]
-                sy = np.int64(min(max(np.rint(ys[i] - dd * oy), zero), hi_y))
-                sx = np.int64(min(max(np.rint(xs[j] - dd * ox), zero), hi_x))
+            d_row = d_samples[i]
+            out_row = out[k * n_y + i].reshape(n_x * c)
+            for j in range(n_x):
+                dd = d_row[j]
+                sy = np.uint64(min(max(np.rint(ys[i] - dd * oy), zero), hi_y))
+                sx = np.uint64(min(max(np.rint(xs[j] - dd * ox), zero), hi_x))
+                src = (sy * uw + sx) * uc
+                dst = np.uint64(j) * uc
                 for ch in range(c):
-                    out[k * n_y + i, j, ch] = np.float32(view[sy, sx, ch]) * scale
+                    out_row[dst + np.uint64(ch)] = np.float32(view[src + np.uint64(ch)]) * scale
