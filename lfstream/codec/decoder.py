@@ -14,6 +14,7 @@ from __future__ import annotations
 import io
 import os
 from collections.abc import Iterator
+from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -200,7 +201,7 @@ class Decoder:
         """What a views sequence may start with: the centre payload's key frame (format 4)."""
         return packet.image if self.header.codec == CODEC_AV1 else None
 
-    def _start_residuals(self, packets: list[Packet]) -> list:
+    def _start_residuals(self, packets: list[Packet]) -> list[Future | None]:
         """Each packet's residual layer decoding (dav1d) on a worker thread, started before the
         centre view, the hint and the warp, which it does not depend on (``None`` where none
         is applied)."""
@@ -212,7 +213,7 @@ class Decoder:
                                                           self._residual_centre(p)))
                 if self._residual_applies(p) else None for p in packets]
 
-    def _add_residual(self, packet: Packet, frame: DecodedFrame, planes=None) -> DecodedFrame:
+    def _add_residual(self, packet: Packet, frame: DecodedFrame, planes: Future | None = None) -> DecodedFrame:
         """``frame`` with the packet's residual layer where it applies; ``planes``: its
         decoding started by :meth:`_start_residuals` (a future), else decoded here."""
         if self._residual_applies(packet):
