@@ -41,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lfstream.errors import LFStreamError
-    from lfstream.io._fs import fresh_dir, prepare_output_dir
+    from lfstream.io._fs import fresh_dir, prepare_output_dir, remove_if_made_empty
     from lfstream.stream import Pipeline, Source, file_source, synthetic_source
     from lfstream.stream.report import stopped_summary
     from lfstream.stream.transport import TcpSender, parse_address
@@ -62,9 +62,8 @@ def run(args: argparse.Namespace) -> int:
             else:
                 source = file_source(args.input, read_options(args))
         except LFStreamError:
-            # an input refused before anything ran: the folder this run made goes too (still empty)
-            if created and not any(out.iterdir()):
-                out.rmdir()
+            if out is not None:  # an input refused before anything ran: nothing left behind
+                remove_if_made_empty(out, created)
             raise
         cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp, depth_hint=not args.no_depth_hint,
                                         preset=args.preset, residual=args.residual,

@@ -171,7 +171,7 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
         :class:`BatchReport`; an input that failed has ``status="failed"`` and its error.
     """
     from lfstream.io import ReadOptions, load_lf, write_lf
-    from lfstream.io._fs import atomic_open, prepare_output_dir
+    from lfstream.io._fs import atomic_open, prepare_output_dir, remove_if_made_empty
 
     if mode not in MODES or engine not in ENGINES:
         raise LFValueError(f"mode: one of {', '.join(MODES)}; engine: one of {', '.join(ENGINES)}; "
@@ -254,8 +254,8 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
             res.status = "ok"
         except LFStreamError as exc:
             res.status, res.error = "failed", f"{res.input}: {exc}"
-    if created and not any(f.status == "ok" for f in report.files) and not any(out_dir.iterdir()):
-        out_dir.rmdir()  # every input failed: the folder this call made goes too (still empty)
+    if not any(f.status == "ok" for f in report.files):  # every input failed
+        remove_if_made_empty(out_dir, created)
     report.wall_s = time.perf_counter() - t0
     return report
 

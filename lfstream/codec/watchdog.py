@@ -53,6 +53,7 @@ def _run_into(fn: Callable[[], object], outcome: dict[str, object]) -> None:
 
 _background: ThreadPoolExecutor | None = None
 _background_lock = threading.Lock()
+_WORKER_PREFIX = "lfstream-worker"  # the workers' thread names (on_worker_thread)
 
 
 def in_background(fn: Callable[[], T]) -> Future:
@@ -67,7 +68,7 @@ def in_background(fn: Callable[[], T]) -> Future:
     global _background
     with _background_lock:
         if _background is None:
-            _background = ThreadPoolExecutor(max_workers=2, thread_name_prefix="lfstream-worker")
+            _background = ThreadPoolExecutor(max_workers=2, thread_name_prefix=_WORKER_PREFIX)
     return _background.submit(fn)
 
 
@@ -75,7 +76,7 @@ def on_worker_thread() -> bool:
     """Whether the caller runs on one of :func:`in_background`'s worker threads, where it
     must not submit more work and wait for it (two busy workers waiting on each other's
     queue would never finish)."""
-    return threading.current_thread().name.startswith("lfstream-worker")
+    return threading.current_thread().name.startswith(_WORKER_PREFIX)
 
 
 def call_with_deadline(fn: Callable[[], T], timeout_s: float, what: str, attempts: int = ATTEMPTS) -> T:

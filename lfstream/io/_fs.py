@@ -96,6 +96,15 @@ def prepare_output_dir(out: str | os.PathLike, overwrite: bool = False) -> Path:
     return out
 
 
+def remove_if_made_empty(folder: str | os.PathLike, made: bool) -> None:
+    """Removes the output ``folder`` where this run made it (``made``: it did not exist
+    before :func:`prepare_output_dir`) and wrote nothing to it, so a run that failed first
+    leaves nothing behind; a folder the user made stays, empty or not."""
+    folder = Path(folder)
+    if made and folder.is_dir() and not any(folder.iterdir()):
+        folder.rmdir()
+
+
 __all__ = [
     "temp_sibling",
     "atomic_path",
@@ -105,4 +114,5 @@ __all__ = [
     "check_new_file",
     "fresh_dir",
     "prepare_output_dir",
+    "remove_if_made_empty",
 ]
