@@ -75,15 +75,12 @@ def _timed(fn):
     return out, time.perf_counter() - t0
 
 
-#: decodes timed per point (the median; --runs): a decode takes milliseconds, and one timed
-#: run moved by up to a third between neighbouring points of the same curve
-DECODE_RUNS = [5]
-
-
-def _timed_decode(fn):
-    """``fn()``'s result and the median of :data:`DECODE_RUNS` timed calls."""
+def _timed_decode(fn, runs: int):
+    """``fn()``'s result and the median of ``runs`` timed calls (--runs: a decode takes
+    milliseconds, and one timed run moved by up to a third between neighbouring points of
+    the same curve)."""
     out, t = _timed(fn)
-    times = [t] + [_timed(fn)[1] for _ in range(DECODE_RUNS[0] - 1)]
+    times = [t] + [_timed(fn)[1] for _ in range(runs - 1)]
     return out, float(np.median(times))
 
 
@@ -92,17 +89,17 @@ def _point(lf: np.ndarray, data: bytes, rec: np.ndarray, param, enc_s: float, de
             "mssim": float(mssim(lf, rec)), "encode_s": enc_s, "decode_s": dec_s}
 
 
-def lfstream_curve(lf: np.ndarray, preset: str | None, quick: bool) -> list[dict]:
+def lfstream_curve(lf: np.ndarray, preset: str | None, quick: bool, runs: int) -> list[dict]:
     pts = []
     for q in QUALITIES[::2] if quick else QUALITIES:
         lfstream.encode(lf, quality=q, preset=preset)  # warm (kernels, codec libraries)
         data, t_enc = _timed(lambda: lfstream.encode(lf, quality=q, preset=preset))
-        rec, t_dec = _timed_decode(lambda: lfstream.decode(data)[0])
+        rec, t_dec = _timed_decode(lambda: lfstream.decode(data)[0], runs)
         pts.append(_point(lf, data, rec, q, t_enc, t_dec))
     return pts
 
 
-def rate_control_curve(lf: np.ndarray, quick: bool, preset: str | None = None) -> list[dict]:
+def rate_control_curve(lf: np.ndarray, quick: bool, runs: int, preset: str | None = None) -> list[dict]:
     """Rate control at every target; ``preset`` named: only that preset (``fast``: the quick
     search, lfstream.codec.rate.SEARCHES)."""
     from lfstream.codec.bitstream import split_stream
@@ -110,7 +107,7 @@ def rate_control_curve(lf: np.ndarray, quick: bool, preset: str | None = None) -
     pts = []
     for target in TARGETS[1:5] if quick else TARGETS:
         data, t_enc = _timed(lambda: lfstream.encode(lf, bpp=target, preset=preset))
-        rec, t_dec = _timed_decode(lambda: lfstream.decode(data)[0])
+        rec, t_dec = _timed_decode(lambda: lfstream.decode(data)[0], runs)
         header = split_stream(data)[0]
         p = _point(lf, data, rec, target, t_enc, t_dec)
         p.update({"target_bpp": target, "preset": header.meta.get("preset", "fast"), "quality": header.quality,
@@ -121,11 +118,11 @@ def rate_control_curve(lf: np.ndarray, quick: bool, preset: str | None = None) -
     return pts
 
 
-def baseline_curve(lf: np.ndarray, codec: str, preset: str, params) -> list[dict]:
+def baseline_curve(lf: np.ndarray, codec: str, preset: str, params, runs: int) -> list[dict]:
     pts = []
     for q in params:
         data, t_enc = _timed(lambda: encode_views(lf, codec, q, constant_qp=True, preset=preset))
-        rec, t_dec = _timed_decode(lambda: decode_views(data, codec, lf.shape[:2], lf.shape[2:4]))
+        rec, t_dec = _timed_decode(lambda: decode_views(data, codec, lf.shape[:2], lf.shape[2:4]), runs)
         pts.append(_point(lf, data, rec, q, t_enc, t_dec))
     return pts
 
@@ -214,16 +211,16 @@ def main(argv=None) -> dict:
     p.add_argument("--skip-presets", action="store_true",
                    help="leave out the fixed-preset lfstream curves (rate control and the baselines only)")
     args = p.parse_args(argv)
-    DECODE_RUNS[0] = max(1, 1 if args.quick else args.runs)
+    runs = 1 if args.quick else max(1, args.runs)
     only = set(args.scenes.split(",")) if args.scenes else None
     results = []
     for name, lf in scenes(args.quick, only):
-        curves = {} if args.skip_presets else {f"lfstream {preset or 'default'}": lfstream_curve(lf, preset, args.quick)
+        curves = {} if args.skip_presets else {f"lfstream {preset or 'default'}": lfstream_curve(lf, preset, args.quick, runs)
                                                for preset in PRESETS}
-        curves["lfstream --bpp (rate control)"] = rate_control_curve(lf, args.quick)
-        curves["lfstream --bpp --preset fast"] = rate_control_curve(lf, args.quick, preset="fast")
+        curves["lfstream --bpp (rate control)"] = rate_control_curve(lf, args.quick, runs)
+        curves["lfstream --bpp --preset fast"] = rate_control_curve(lf, args.quick, runs, preset="fast")
         for method, (codec, preset, params) in BASELINES.items():
-            curves[method] = baseline_curve(lf, codec, preset, params)
+            curves[method] = baseline_curve(lf, codec, preset, params, runs)
         bd = bjontegaard(curves)
         speed = encode_speed(curves)
         dspeed = decode_speed(curves)
