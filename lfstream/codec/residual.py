@@ -302,8 +302,25 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
     for k, f in enumerate(decoded[lead:]):
         if f.format.name != "yuv420p" or (f.height, f.width) != (h + h % 2, w + w % 2):
             raise BitstreamError(f"residual frame is {f.height}x{f.width} {f.format.name}, header says {h}x{w}", frame)
-        planes[k] = f.to_ndarray(format="yuv420p")
+        _copy_i420(f, planes[k])
     return planes
+
+
+def _copy_i420(f, out: np.ndarray) -> None:
+    """A decoded yuv420p frame's planes into ``out``, PyAV's ``(3H/2, W)`` layout, with one
+    copy per plane (``to_ndarray`` copies the frame into a new array that then had to be
+    copied again: 2.1 -> 1.4 ms for 48 frames of 376 x 540)."""
+    h, w = f.height, f.width
+    shapes = ((h, w), (h // 2, w // 2), (h // 2, w // 2))
+    if any(p.line_size < pw or p.buffer_size < ph * p.line_size for p, (ph, pw) in zip(f.planes, shapes)):
+        out[...] = f.to_ndarray(format="yuv420p")  # a layout this copy does not expect
+        return
+    flat = out.reshape(-1)
+    pos = 0
+    for plane, (ph, pw) in zip(f.planes, shapes):
+        rows = np.frombuffer(plane, np.uint8, count=ph * plane.line_size).reshape(ph, plane.line_size)  # padded rows
+        flat[pos:pos + ph * pw].reshape(ph, pw)[...] = rows[:, :pw]
+        pos += ph * pw
 
 
 def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None, centre: bytes | None = None,

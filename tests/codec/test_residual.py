@@ -385,3 +385,21 @@ def test_residual_streams_decode_the_same_from_the_worker_threads(coded):
         on_worker, out = job.result(timeout=60)
         assert on_worker and np.array_equal(out, expected)
     assert not on_worker_thread()
+
+
+@pytest.mark.parametrize("size", [(64, 96), (34, 50), (120, 540)])
+def test_decoded_planes_are_copied_as_pyav_lays_them_out(size):
+    """The residual's planes are copied out of each decoded frame plane by plane (rows padded
+    to the decoder's line size); they equal PyAV's ``to_ndarray`` to the bit, sizes whose
+    chroma rows are padded included."""
+    import av
+
+    from lfstream.codec.residual import _copy_i420
+
+    h, w = size
+    planes = np.random.default_rng(h * w).integers(0, 256, (h * 3 // 2, w), dtype=np.uint8)
+    frame = av.VideoFrame.from_ndarray(planes, format="yuv420p")
+    out = np.zeros_like(planes)
+    _copy_i420(frame, out)
+    np.testing.assert_array_equal(out, frame.to_ndarray(format="yuv420p"))
+    np.testing.assert_array_equal(out, planes)
