@@ -219,8 +219,28 @@ def encode_views_keyed(lf: np.ndarray, quality: int, speed: int) -> tuple[bytes,
     return packets[0], _payload(VIEWS_KEYED_FORMAT, len(order) - 1, packets[1:])
 
 
-#: dav1d worker threads for a residual sequence (frame threading across the views)
+#: The most dav1d worker threads a residual sequence gets (frame threading across the views)
 _DECODER_THREADS = max(1, min(4, os.cpu_count() or 1))
+#: Bits per coded pixel (the payload over the sequence's luma samples) from which a sequence
+#: of the views themselves is decoded with worker threads; below it, and for every
+#: ``prediction`` residual, one thread (:func:`_decoder_threads`).
+_THREADED_MIN_BITS = 0.125
+
+
+def _decoder_threads(fmt: int, nbytes: int, frames: int, size: tuple[int, int]) -> int:
+    """dav1d threads for a residual payload of format ``fmt``, ``nbytes`` long, ``frames``
+    frames of ``size``. Frame threading pays only where each frame has much to decode: on the
+    2-core machine (decode of the whole light field, alternating rounds) the views of toys_array
+    at 0.22-0.87 bits per pixel decoded 9-13 % faster on two threads than on one, lytro_bikes'
+    at 0.15 3 % faster, and every sequence under 0.12 was faster on one (seahorse 0.02-0.1:
+    -7 to -14 %, dino 0.04 -22 %, lytro_translucent 0.01-0.04 -2 %, lytro_bikes 0.04 -12 %,
+    half-size views -14 %). A ``prediction`` residual decodes beside the warp, which keeps
+    both cores busy: one thread was faster at every rate measured (synthetic 0.01-0.12 bpp,
+    lytro_bikes 0.15 and 0.40: -2 to -7 %)."""
+    if fmt == RESIDUAL_FORMAT:
+        return 1
+    bits = 8.0 * nbytes / max(1, frames * size[0] * size[1])
+    return _DECODER_THREADS if bits >= _THREADED_MIN_BITS else 1
 
 
 def _drain(ctx) -> None:
@@ -278,13 +298,13 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
         packets.append(data[pos:pos + n])
         pos += n
     ctx = av.CodecContext.create("libdav1d", "r")
-    # Worker threads (toys_array's default decode 58.5 -> 52.5 ms on two cores, bench/ab.py). A test-suite
-    # run once hung with dav1d's workers parked on futexes while a sequence was torn down:
+    # Worker threads where they pay (:func:`_decoder_threads`). A test-suite run once hung
+    # with dav1d's workers parked on futexes while a sequence was torn down:
     # the decoder was then freed with frames in flight (a loop that stopped early, without a
     # flush). So nothing is left in flight on any way out: every packet decoded and the
     # decoder flushed, and where decoding fails or is interrupted, its buffers flushed
     # (dav1d_flush: the workers drained) before the context is freed.
-    ctx.thread_count = _DECODER_THREADS
+    ctx.thread_count = _decoder_threads(fmt, len(data), count, (h, w))
     decoded = []
     try:
         for p in packets:
