@@ -39,6 +39,18 @@ def test_av1_round_trip_is_faithful_deterministic_and_crops_odd_sizes(scene):
     assert sizes[0] < sizes[1] < sizes[2]
 
 
+def test_av1_centre_decodes_the_same_on_one_thread_or_several(scene, monkeypatch):
+    """Small centre views are decoded on one dav1d thread (AV1_THREADED_MIN_PIXELS), large
+    ones threaded: the same pixels either way."""
+    from lfstream.codec import intra
+
+    img = np.ascontiguousarray(scene[2, 2])
+    data = encode_av1(img, 60)
+    one = decode_av1(data, img.shape[:2])
+    monkeypatch.setattr(intra, "AV1_THREADED_MIN_PIXELS", 0)
+    np.testing.assert_array_equal(decode_av1(data, img.shape[:2]), one)
+
+
 def test_colour_conversion_keeps_chroma_detail():
     """4:2:0 by 2x2 means and bilinear up-sampling: within 1 dB of JPEG q100's own 4:2:0
     round trip on a textured synthetic view (OpenCV's I420 conversion lost ~5 dB there)."""
