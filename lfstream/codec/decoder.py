@@ -45,6 +45,13 @@ HANCE_MAX_QUALITY = {"fast": 60, "paper": 70}
 HANCE_AUTO_GPU_ONLY = ("fast",)
 #: Frames per network batch the decoder accepts.
 BATCH_RANGE = (1, 256)
+#: Residual bits per coded pixel from which the warp leaves the residual's decode a core
+#: while it runs (:func:`lfstream.codec.warp.warp_views`'s ``beside``). Below it the decode
+#: (dav1d, one thread) is nearly done when the warp starts, and handing it a core gained
+#: nothing: the synthetic clip's rate-control streams, alternating processes, 8 rounds,
+#: 0.0045 and 0.0086 bits a pixel (0.01 and 0.02 bpp) 1.02 and 1.03-1.05x, within the
+#: noise; 0.026 and 0.056 (0.04 and 0.08 bpp) 0.93 and 0.84x, lytro_bikes at 0.12 0.84x.
+BESIDE_MIN_BITS = 0.015
 
 
 @dataclass
@@ -197,6 +204,13 @@ class Decoder:
     def _residual_applies(self, packet: Packet) -> bool:
         return bool(packet.residual) and (self.applies_residual or self._views_only(packet))
 
+    def _long_residual(self, packet: Packet) -> bool:
+        """Whether the packet's residual holds at least :data:`BESIDE_MIN_BITS` bits a coded
+        pixel (its decode then outlasts the work before the warp)."""
+        u, v = self.header.views
+        h, w = self.header.size
+        return 8 * len(packet.residual) >= BESIDE_MIN_BITS * max(1, u * v - 1) * h * w
+
     def _residual_centre(self, packet: Packet) -> bytes | None:
         """What a views sequence may start with: the centre payload's key frame (format 4)."""
         return packet.image if self.header.codec == CODEC_AV1 else None
@@ -249,7 +263,10 @@ class Decoder:
         return self._last_gains
 
     def _warp(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray,
-              axes: np.ndarray | None = None) -> DecodedFrame:
+              axes: np.ndarray | None = None, beside: Future | None = None) -> DecodedFrame:
+        """The prediction of the views (or, for a residual of the views themselves, the
+        centre alone); ``beside``: the packet's residual decoding, which the warp leaves a
+        core while it runs (:func:`lfstream.codec.warp.warp_views`)."""
         if self._views_only(packet):  # the residual replaces every view but the centre
             u, v = self.header.views
             lf = np.empty((u, v, *centre.shape), np.uint8)
@@ -257,7 +274,8 @@ class Decoder:
             return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes)
         # the warp kernel multiplies the gains in as it samples (no second pass over the views)
         gains = self._gains(packet)
-        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion, gains=gains, axes=axes)
+        lf = warp_views(centre, disparity, self.header.views, occlusion=self.occlusion, gains=gains, axes=axes,
+                        beside=beside)
         return DecodedFrame(packet.seq, packet.timestamp_us, lf, centre, disparity, axes, gains)
 
     @property
@@ -322,7 +340,8 @@ class Decoder:
             disparities = [hint if hint is not None else np.zeros((h, w), np.float32) for hint in hints]
             frames = self._warp_on_device(packets, centres, disparities, axes) if self.warps_on_device else None
             if frames is None:
-                frames = [self._warp(p, centre, d, a) for p, centre, d, a in zip(packets, centres, disparities, axes)]
+                frames = [self._warp(p, centre, d, a, r if r is not None and self._long_residual(p) else None)
+                          for p, centre, d, a, r in zip(packets, centres, disparities, axes, residuals)]
             return [self._add_residual(p, frame, r) for p, frame, r in zip(packets, frames, residuals)]
         self.residual_skipped += sum(1 for p in packets if p.residual)
         from lfstream.models.depth_net import predict_view_disparities
@@ -423,5 +442,5 @@ def read_lfs(path: str | os.PathLike, max_frames: int | None = None) -> tuple[np
     return decode_file(path, depth="flat", max_frames=max_frames)
 
 
-__all__ = ["DEPTH_MODES", "HANCE_MODES", "HANCE_MAX_QUALITY", "BATCH_RANGE", "Decoder", "DecodedFrame", "decode",
-           "iter_decode", "decode_file", "read_lfs"]
+__all__ = ["DEPTH_MODES", "HANCE_MODES", "HANCE_MAX_QUALITY", "BATCH_RANGE", "BESIDE_MIN_BITS", "Decoder",
+           "DecodedFrame", "decode", "iter_decode", "decode_file", "read_lfs"]

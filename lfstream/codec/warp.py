@@ -52,6 +52,7 @@ against a quarter (``bench/ab.py --what decode``, 8 rounds): synthetic 0.886, se
 from __future__ import annotations
 
 import functools
+from concurrent.futures import Future
 
 import numpy as np
 
@@ -214,6 +215,7 @@ def warp_views(
     occlusion: bool = True,
     gains: np.ndarray | None = None,
     axes: np.ndarray | None = None,
+    beside: Future | None = None,
 ) -> np.ndarray:
     """Synthesises a light field from its centre view and the centre view's disparity.
 
@@ -231,6 +233,9 @@ def warp_views(
             bilinearly up-sampled and multiplied in; ``None``: none.
         axes: ``(2, 2)`` view axes of the capture (:func:`lfstream.lightfield.view_offsets`);
             ``None``: the convention.
+        beside: work running on another thread meanwhile (the decoder's residual layer):
+            until it is done the views are warped on this thread alone, a few at a time,
+            the rest then on every thread (:data:`BESIDE_CHUNK_VIEWS`); the same pixels.
 
     Shape:
         - output: ``(U, V, H, W, C)`` uint8
@@ -252,7 +257,7 @@ def warp_views(
 
         return apply_gains(flat, gains)
     d = np.ascontiguousarray(d)
-    return _warp_kernel(src, d, None, offsets, *_occlusion_plan(d, offsets, occlusion), gains)
+    return _warp_kernel(src, d, None, offsets, *_occlusion_plan(d, offsets, occlusion), gains, beside)
 
 
 def warp_views_at(centre: np.ndarray, disparity: np.ndarray, views: tuple[int, int], keys: list[tuple[int, int]],
@@ -317,7 +322,8 @@ VIEW_COST_TAPS = {"all": 1.0, "column": 0.8, "row": 0.65, "centre": 0.2}
 VIEW_COST_SPLAT = 0.5
 
 
-def deal_views(offsets: np.ndarray, splat: np.ndarray, tasks: int) -> tuple[np.ndarray, np.ndarray]:
+def deal_views(offsets: np.ndarray, splat: np.ndarray, tasks: int,
+               views: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Shares the views of one warp among ``tasks`` parallel tasks by estimated cost
     (:data:`VIEW_COST_TAPS`, :data:`VIEW_COST_SPLAT`): the costliest view first, each to the
     least loaded task (ties to the lower view index, so the deal is deterministic). Which
@@ -330,31 +336,35 @@ def deal_views(offsets: np.ndarray, splat: np.ndarray, tasks: int) -> tuple[np.n
         offsets: ``(U, V, 2)`` displacement of each view per unit disparity.
         splat: ``(U, V)`` the share of each view's rows splatted (bool: all or none).
         tasks: how many to deal to (at most one per view is used).
+        views: the flat view indices ``u * V + v`` to deal; ``None``: every view.
 
     Shape:
-        - output: ``order`` ``(U * V,)`` int64 flat view indices ``u * V + v`` task by
-          task, and ``starts`` ``(tasks + 1,)`` int64: task ``t`` warps
-          ``order[starts[t]:starts[t + 1]]``, ``tasks = min(tasks, U * V)`` (at least 1).
+        - output: ``order`` ``(N,)`` int64 flat view indices task by task (N: the views
+          dealt), and ``starts`` ``(tasks + 1,)`` int64: task ``t`` warps
+          ``order[starts[t]:starts[t + 1]]``, ``tasks = min(tasks, N)`` (at least 1). With
+          ``tasks=1`` the order is the costliest view first.
     """
     du = tuple((np.asarray(offsets[..., 0]).ravel() != 0).tolist())
     dv = tuple((np.asarray(offsets[..., 1]).ravel() != 0).tolist())
     # the share of rows to a tenth: the deal is an estimate, and a stream's frames then share it
     share = tuple(np.round(np.asarray(splat, np.float64).ravel(), 1).tolist())
-    order, starts = _deal(du, dv, share, max(1, int(tasks)))
+    subset = None if views is None else tuple(int(k) for k in np.asarray(views).ravel())
+    order, starts = _deal(du, dv, share, max(1, int(tasks)), subset)
     return order.copy(), starts.copy()
 
 
 @functools.lru_cache(maxsize=64)  # a stream deals the same grid frame after frame
 def _deal(du: tuple[bool, ...], dv: tuple[bool, ...], splat: tuple[float, ...],
-          tasks: int) -> tuple[np.ndarray, np.ndarray]:
+          tasks: int, subset: tuple[int, ...] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`deal_views` of the views' displacement flags (nonzero per axis)."""
     taps = {(True, True): VIEW_COST_TAPS["all"], (True, False): VIEW_COST_TAPS["column"],
             (False, True): VIEW_COST_TAPS["row"], (False, False): VIEW_COST_TAPS["centre"]}
     cost = [taps[a, b] + VIEW_COST_SPLAT * s for a, b, s in zip(du, dv, splat)]
-    tasks = min(tasks, len(cost))
+    views = list(range(len(cost))) if subset is None else list(subset)
+    tasks = max(1, min(tasks, len(views)))
     load = [0.0] * tasks
     dealt: list[list[int]] = [[] for _ in range(tasks)]
-    for k in sorted(range(len(cost)), key=lambda i: (-cost[i], i)):
+    for k in sorted(views, key=lambda i: (-cost[i], i)):
         t = min(range(tasks), key=load.__getitem__)  # the first least loaded task
         dealt[t].append(k)
         load[t] += cost[k]
@@ -363,11 +373,25 @@ def _deal(du: tuple[bool, ...], dv: tuple[bool, ...], splat: tuple[float, ...],
     return order, starts
 
 
+#: Views a call warps on the calling thread alone while other work runs beside the warp
+#: (:func:`warp_views`'s ``beside``: the decoder's residual layer, which dav1d decodes on one
+#: thread). The warp's kernel deals its views to its threads before it starts, so a third
+#: busy thread on two cores slowed both (measured, synthetic 7x7x375x540 with its residual at
+#: 0.01 bpp: the residual decode 8.3 -> 16 ms, the warp 17.5 -> 25 ms); one thread beside it
+#: leaves each its core (both unchanged), and the views left when it is done go to every
+#: thread. Same pixels. Decodes of the synthetic clip's rate-control streams, alternating
+#: processes, 4 rounds: 0.08 bpp 51.6 -> 43.6 ms, 0.04 43.4 -> 40.8, 0.02 35.7 -> 36.5
+#: (where the residual decode ends before the warp starts there is nothing to gain).
+BESIDE_CHUNK_VIEWS = 4
+
+
 def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, offsets: np.ndarray,
-                 splat: np.ndarray, reach: np.ndarray, gains: np.ndarray | None) -> np.ndarray:
+                 splat: np.ndarray, reach: np.ndarray, gains: np.ndarray | None,
+                 beside: Future | None = None) -> np.ndarray:
     """Runs the fused warp (:func:`lfstream.codec._kernels.warp_all_views`) over every
     channel triple of ``src`` (H, W, C) uint8; ``splat``: (U, V, H) bool, the view rows
-    splatted (:func:`splat_rows`), ``reach``: (U, V) int64 (:func:`splat_reach`)."""
+    splatted (:func:`splat_rows`), ``reach``: (U, V) int64 (:func:`splat_reach`);
+    ``beside``: :func:`warp_views`'s."""
     import numba
 
     from lfstream.codec._kernels import _LANES, pack_lanes, warp_all_views
@@ -383,16 +407,46 @@ def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, o
         cols, col_w = _linear_taps(w, gains.shape[3])
     if view_disp is None:
         view_disp = np.zeros((0, 0, 1, 1), np.float32)
-    order, starts = deal_views(offsets, splat.mean(axis=-1), numba.get_num_threads())
+    share = splat.mean(axis=-1)
+    threads = numba.get_num_threads()
     out = np.empty((u, v, h, w * c), np.uint8)
     packed = np.empty((h + 2) * (w + 2), np.uint64)  # with a one-pixel border (pack_lanes)
     src, d, view_disp = read_only(src), read_only(d), read_only(view_disp)  # one signature (read_only)
     for ch0 in range(0, c, _LANES):  # three channels per pass, in the lanes of one uint64
         n_ch = min(_LANES, c - ch0)
         pack_lanes(src, ch0, n_ch, packed)
-        warp_all_views(packed, c, ch0, n_ch, d, view_disp, offsets, splat, reach, gains, rows, row_w, cols,
-                       col_w, order, starts, out)
+
+        def warp(order: np.ndarray, starts: np.ndarray, ch0: int = ch0, n_ch: int = n_ch) -> None:
+            warp_all_views(packed, c, ch0, n_ch, d, view_disp, offsets, splat, reach, gains, rows, row_w, cols,
+                           col_w, order, starts, out)
+
+        rest = None
+        if beside is not None and threads > 1 and c <= _LANES and not beside.done():
+            ranked, _ = deal_views(offsets, share, 1)  # the costliest view first
+            done = _warp_beside(beside, ranked, warp)
+            rest = ranked[done:]
+        if rest is None or len(rest):
+            warp(*deal_views(offsets, share, threads, rest))
     return out.reshape(u, v, h, w, c)
+
+
+def _warp_beside(beside: Future, ranked: np.ndarray, warp) -> int:
+    """Warps views of ``ranked`` in order, :data:`BESIDE_CHUNK_VIEWS` a call, on the
+    calling thread alone (numba's thread count is per thread; restored) until ``beside``
+    is done; returns how many it warped."""
+    import numba
+
+    done = 0
+    previous = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        while done < len(ranked) and not beside.done():
+            chunk = np.ascontiguousarray(ranked[done:done + BESIDE_CHUNK_VIEWS])
+            warp(chunk, np.array([0, len(chunk)], np.int64))
+            done += len(chunk)
+    finally:
+        numba.set_num_threads(previous)
+    return done
 
 
 def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: bool = True,
@@ -453,5 +507,5 @@ def warp_views_per_view(centre: np.ndarray, disparities: np.ndarray, axes: np.nd
                         np.zeros((u, v, maps.shape[2]), bool), np.zeros((u, v), np.int64), gains)
 
 
-__all__ = ["SPLAT_TOLERANCE_PX", "VIEW_COST_TAPS", "VIEW_COST_SPLAT", "deal_views", "splat_views", "splat_rows",
-           "splat_reach", "view_disparities", "warp_views", "warp_views_at", "warp_views_per_view"]
+__all__ = ["SPLAT_TOLERANCE_PX", "VIEW_COST_TAPS", "VIEW_COST_SPLAT", "BESIDE_CHUNK_VIEWS", "deal_views", "splat_views",
+           "splat_rows", "splat_reach", "view_disparities", "warp_views", "warp_views_at", "warp_views_per_view"]

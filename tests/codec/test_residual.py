@@ -421,3 +421,25 @@ def test_residual_decoder_threads_follow_the_payload():
         assert res._decoder_threads(fmt, at - 1000, frames, size) == 1
         assert res._decoder_threads(fmt, at + 1000, frames, size) == most
     assert res._decoder_threads(res.VIEWS_FORMAT, 0, 0, size) == 1  # no division by zero
+
+
+def test_the_warp_leaves_a_long_residual_decode_a_core(coded, monkeypatch):
+    """The decoder hands the warp its residual's decoding (``beside``) where the residual
+    holds at least BESIDE_MIN_BITS bits a pixel, and not below; the frames are the same."""
+    from lfstream.codec import decoder as decoder_module
+
+    header, packets = split_stream(coded)
+    seen = []
+    warp = decoder_module.warp_views
+
+    def spy(*args, beside=None, **kwargs):
+        seen.append(beside is not None)
+        return warp(*args, beside=beside, **kwargs)
+
+    monkeypatch.setattr(decoder_module, "warp_views", spy)
+    outs = []
+    for bits in (0.0, float("inf")):
+        monkeypatch.setattr(decoder_module, "BESIDE_MIN_BITS", bits)
+        outs.append(Decoder(header).decode_packet(packets[0]).lf)
+    assert seen == [True, False]
+    np.testing.assert_array_equal(outs[0], outs[1])

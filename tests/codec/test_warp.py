@@ -197,6 +197,61 @@ def test_views_are_dealt_by_cost_and_each_once():
         assert (again[0] == order).all() and again[0] is not order
 
 
+def test_a_subset_of_views_is_dealt_costliest_first():
+    """deal_views of a subset deals those views only, each once, and with one task in
+    order of cost, the costliest first (what the warp beside other work takes in chunks)."""
+    offsets = view_offsets((5, 5))
+    splat = np.zeros((5, 5))
+    splat[0, 0] = 1.0
+    order, starts = deal_views(offsets, splat, 1)
+    du, dv = offsets[..., 0].ravel() != 0, offsets[..., 1].ravel() != 0
+    kind = np.where(du & dv, "all", np.where(du, "column", np.where(dv, "row", "centre")))
+    cost = np.array([VIEW_COST_TAPS[k] for k in kind]) + VIEW_COST_SPLAT * splat.ravel()
+    assert order[0] == 0 and np.all(np.diff(cost[order]) <= 0) and order[-1] == 12  # the centre view last
+    subset = order[7:]
+    order2, starts2 = deal_views(offsets, splat, 2, subset)
+    assert sorted(order2.tolist()) == sorted(subset.tolist()) and starts2.tolist()[::2] == [0, len(subset)]
+    assert deal_views(offsets, splat, 8, subset[:3])[1].tolist() == [0, 1, 2, 3]  # no more tasks than views
+
+
+class _Beside:
+    """A stand-in for the future the decoder passes: done after ``polls`` checks."""
+
+    def __init__(self, polls: int) -> None:
+        self.polls = polls
+
+    def done(self) -> bool:
+        self.polls -= 1
+        return self.polls < 0
+
+
+@pytest.mark.parametrize("polls", [0, 3, 10**9])
+def test_warp_beside_other_work_gives_the_same_views(polls, rng, monkeypatch):
+    """Views warped on one thread while other work runs (``beside``: done at once, after a
+    two chunks, never) and the rest on every thread are the views of the plain warp, bit
+    for bit; the caller's numba thread count is restored."""
+    centre, disp = _scene(seed=5, size=(40, 52))
+    gains = rng.uniform(0.8, 1.2, (5, 5, 3, 3, 3)).astype(np.float32)
+    expected = warp_views(centre, disp, (5, 5), gains=gains)
+    threads = numba.get_num_threads()
+    calls = []
+    kernel = warp_module._warp_beside
+
+    def counted(beside, ranked, warp):
+        done = kernel(beside, ranked, warp)
+        calls.append(done)
+        return done
+
+    monkeypatch.setattr(warp_module, "_warp_beside", counted)
+    out = warp_views(centre, disp, (5, 5), gains=gains, beside=_Beside(polls))
+    np.testing.assert_array_equal(out, expected)
+    assert numba.get_num_threads() == threads
+    if threads > 1:  # one thread: nothing to leave to the other work
+        # polls: the check before the warp, then one before each chunk
+        warped_alone = {0: None, 3: 2 * warp_module.BESIDE_CHUNK_VIEWS, 10**9: 25}[polls]
+        assert calls == ([] if warped_alone is None else [warped_alone])
+
+
 @pytest.mark.parametrize("channels", [3, 4])
 def test_views_on_the_centres_row_and_column_sample_two_taps_to_the_bit(channels, rng):
     """A view on the centre's row (no vertical displacement) or column samples two taps,
