@@ -379,9 +379,11 @@ def _deal(du: tuple[bool, ...], dv: tuple[bool, ...], splat: tuple[float, ...],
 #: busy thread on two cores slowed both (measured, synthetic 7x7x375x540 with its residual at
 #: 0.01 bpp: the residual decode 8.3 -> 16 ms, the warp 17.5 -> 25 ms); one thread beside it
 #: leaves each its core (both unchanged), and the views left when it is done go to every
-#: thread. Same pixels. Decodes of the synthetic clip's rate-control streams, alternating
-#: processes, 4 rounds: 0.08 bpp 51.6 -> 43.6 ms, 0.04 43.4 -> 40.8, 0.02 35.7 -> 36.5
-#: (where the residual decode ends before the warp starts there is nothing to gain).
+#: thread. Same pixels. Decodes, alternating processes, 8 rounds: the synthetic clip's
+#: rate-control streams at 0.08 and 0.04 bpp 50.6 -> 44.0 and 42.6 -> 39.5 ms, lytro_bikes
+#: best q80 with a residual at q60 60.9 -> 48.7 ms. Where the residual decode is nearly done
+#: when the warp starts there is nothing to gain: the decoder hands it over only from
+#: :data:`lfstream.codec.decoder.BESIDE_MIN_BITS`.
 BESIDE_CHUNK_VIEWS = 4
 
 
