@@ -221,26 +221,28 @@ def encode_views_keyed(lf: np.ndarray, quality: int, speed: int) -> tuple[bytes,
 
 #: The most dav1d worker threads a residual sequence gets (frame threading across the views)
 _DECODER_THREADS = max(1, min(4, os.cpu_count() or 1))
-#: Bits per coded pixel (the payload over the sequence's luma samples) from which a sequence
-#: of the views themselves is decoded with worker threads; below it, and for every
-#: ``prediction`` residual, one thread (:func:`_decoder_threads`).
-_THREADED_MIN_BITS = 0.125
+#: Payload bytes from which a sequence of the views themselves is decoded with worker
+#: threads; below it, and for every ``prediction`` residual, one thread (:func:`_decoder_threads`).
+_THREADED_MIN_BYTES = 96_000
 
 
-def _decoder_threads(fmt: int, nbytes: int, frames: int, size: tuple[int, int]) -> int:
-    """dav1d threads for a residual payload of format ``fmt``, ``nbytes`` long, ``frames``
-    frames of ``size``. Frame threading pays only where each frame has much to decode: on the
-    2-core machine (decode of the whole light field, alternating rounds) the views of toys_array
-    at 0.22-0.87 bits per pixel decoded 9-13 % faster on two threads than on one, lytro_bikes'
-    at 0.15 3 % faster, and every sequence under 0.12 was faster on one (seahorse 0.02-0.1:
-    -7 to -14 %, dino 0.04 -22 %, lytro_translucent 0.01-0.04 -2 %, lytro_bikes 0.04 -12 %,
-    half-size views -14 %). A ``prediction`` residual decodes beside the warp, which keeps
-    both cores busy: one thread was faster at every rate measured (synthetic 0.01-0.12 bpp,
-    lytro_bikes 0.15 and 0.40: -2 to -7 %)."""
+def _decoder_threads(fmt: int, nbytes: int) -> int:
+    """dav1d threads for a residual payload of format ``fmt``, ``nbytes`` long. Frame
+    threading pays only where the whole sequence has much to decode: starting the workers
+    and filling and draining their pipeline is a cost per sequence. Measured on the 2-core
+    machine (the whole light field's decode, one thread against two, alternating rounds):
+    views sequences of 122-651 KB (lytro_translucent at 0.1 bpp, lytro_bikes q60 and q85,
+    toys_array q50 and q80 and its default) 3-15 % faster on two threads; those of 13-65 KB
+    (seahorse at 0.02-0.1 bpp, lytro_translucent 0.01, lytro_bikes 0.04, dino 0.04,
+    toys_array q20, half-size views) 3-28 % faster on one, lytro_translucent at 0.04 bpp
+    (65 KB) within 4 % either way; neither the bits a pixel
+    nor the bytes a frame separated them (seahorse at 0.1 bpp, 2.2 KB a frame, faster on
+    one; toys_array q50, 2.0 KB a frame, on two). A ``prediction`` residual decodes beside
+    the warp, which keeps both cores busy: one thread was faster at every rate measured
+    (synthetic 0.01-0.12 bpp, lytro_bikes 0.15 and 0.40: 2-7 %)."""
     if fmt == RESIDUAL_FORMAT:
         return 1
-    bits = 8.0 * nbytes / max(1, frames * size[0] * size[1])
-    return _DECODER_THREADS if bits >= _THREADED_MIN_BITS else 1
+    return _DECODER_THREADS if nbytes >= _THREADED_MIN_BYTES else 1
 
 
 def _drain(ctx) -> None:
@@ -304,7 +306,7 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
     # flush). So nothing is left in flight on any way out: every packet decoded and the
     # decoder flushed, and where decoding fails or is interrupted, its buffers flushed
     # (dav1d_flush: the workers drained) before the context is freed.
-    ctx.thread_count = _decoder_threads(fmt, len(data), count, (h, w))
+    ctx.thread_count = _decoder_threads(fmt, len(data))
     decoded = []
     try:
         for p in packets:

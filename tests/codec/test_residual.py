@@ -359,8 +359,8 @@ def test_threaded_residual_decode_matches_one_thread(monkeypatch):
     ref_plain = res.decode_residual(plain, (5, 5), (64, 96))
     ref_keyed = res.decode_residual(keyed, (5, 5), (64, 96), centre=centre)
     monkeypatch.setattr(res, "_DECODER_THREADS", 4)
-    monkeypatch.setattr(res, "_THREADED_MIN_BITS", 0.0)  # these small payloads too
-    assert res._decoder_threads(res.VIEWS_FORMAT, len(plain), 24, (64, 96)) == 4
+    monkeypatch.setattr(res, "_THREADED_MIN_BYTES", 0)  # these small payloads too
+    assert res._decoder_threads(res.VIEWS_FORMAT, len(plain)) == 4
     np.testing.assert_array_equal(res.decode_residual(plain, (5, 5), (64, 96)), ref_plain)
     np.testing.assert_array_equal(res.decode_residual(keyed, (5, 5), (64, 96), centre=centre), ref_keyed)
     rng = np.random.default_rng(3)
@@ -409,18 +409,14 @@ def test_decoded_planes_are_copied_as_pyav_lays_them_out(size):
 
 def test_residual_decoder_threads_follow_the_payload():
     """dav1d's worker threads only where they pay: never for a prediction's residual (it
-    decodes beside the warp), for the views only from _THREADED_MIN_BITS bits a pixel."""
+    decodes beside the warp), for the views only from _THREADED_MIN_BYTES bytes."""
     from lfstream.codec import residual as res
 
-    frames, size = 48, (376, 540)
-    pixels = frames * size[0] * size[1]
-    at = int(res._THREADED_MIN_BITS * pixels / 8)
-    most = res._DECODER_THREADS
-    assert res._decoder_threads(res.RESIDUAL_FORMAT, 10 * at, frames, size) == 1
+    at = res._THREADED_MIN_BYTES
+    assert res._decoder_threads(res.RESIDUAL_FORMAT, 10 * at) == 1
     for fmt in (res.VIEWS_FORMAT, res.HALF_VIEWS_FORMAT, res.VIEWS_KEYED_FORMAT):
-        assert res._decoder_threads(fmt, at - 1000, frames, size) == 1
-        assert res._decoder_threads(fmt, at + 1000, frames, size) == most
-    assert res._decoder_threads(res.VIEWS_FORMAT, 0, 0, size) == 1  # no division by zero
+        assert res._decoder_threads(fmt, at - 1) == 1
+        assert res._decoder_threads(fmt, at) == res._DECODER_THREADS
 
 
 def test_the_warp_leaves_a_long_residual_decode_a_core(coded, monkeypatch):
