@@ -232,7 +232,7 @@ def _decoder_threads(fmt: int, nbytes: int) -> int:
     and filling and draining their pipeline is a cost per sequence. Measured on the 2-core
     machine (the whole light field's decode, one thread against two, alternating rounds):
     views sequences of 122-651 KB (lytro_translucent at 0.1 bpp, lytro_bikes q60 and q85,
-    toys_array q50 and q80 and its default) 3-15 % faster on two threads; those of 13-65 KB
+    toys_array q50 and q80 and its default) 3-15 % faster on two threads; those of 1-65 KB
     (seahorse at 0.02-0.1 bpp, lytro_translucent 0.01, lytro_bikes 0.04, dino 0.04,
     toys_array q20, half-size views) 3-28 % faster on one, lytro_translucent at 0.04 bpp
     (65 KB) within 4 % either way; neither the bits a pixel
