@@ -85,10 +85,15 @@ def synthetic_source(frames: int = 24, views: int = 7, size: tuple[int, int] = (
         if store is not None:
             store.flush()
             del store
-            if done == frames:
-                os.replace(tmp, path)  # complete: later runs read it
-            else:
-                tmp.unlink(missing_ok=True)  # a stream stopped early leaves no partial cache
+            # the cache is a convenience: a folder that went away meanwhile (a test's temporary
+            # cache removed before this generator was collected) must not raise from here
+            try:
+                if done == frames:
+                    os.replace(tmp, path)  # complete: later runs read it
+                else:
+                    tmp.unlink(missing_ok=True)  # a stream stopped early leaves no partial cache
+            except OSError:
+                pass
 
 
 @dataclass

@@ -215,6 +215,24 @@ def test_a_failure_in_any_stage_ends_the_run_promptly_with_its_error(tmp_path, m
     assert f"injected failure in {stage}" in str(err)
 
 
+def test_builtin_clip_cache_that_vanishes_is_no_error(tmp_path, monkeypatch):
+    """The cache folder removed while the clip renders (a temporary cache cleaned up before
+    the source was collected): the frames still come, closing the source raises nothing,
+    and nothing is left behind."""
+    import shutil
+
+    monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path / "cache"))
+    for stop in (3, 1):  # the whole clip (rename), stopped early (remove)
+        source = synthetic_source(frames=3, views=5, size=(32, 48), seed=11)
+        got = [next(source) for _ in range(stop)]
+        assert len(got) == stop
+        shutil.rmtree(tmp_path / "cache")
+        if stop == 3:
+            assert next(source, None) is None  # the end: the rename fails quietly
+        source.close()
+        assert not (tmp_path / "cache").exists()
+
+
 def test_builtin_clip_is_cached_and_identical_to_a_fresh_render(tmp_path, monkeypatch):
     monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path / "cache"))
     fresh = list(synthetic_source(frames=3, views=5, size=(32, 48), seed=9, cache=False))
