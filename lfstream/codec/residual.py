@@ -235,11 +235,11 @@ def _decoder_threads(fmt: int, nbytes: int) -> int:
     toys_array q50 and q80 and its default) 3-15 % faster on two threads; those of 1-65 KB
     (seahorse at 0.02-0.1 bpp, lytro_translucent 0.01, lytro_bikes 0.04, dino 0.04,
     toys_array q20, half-size views) 3-28 % faster on one, lytro_translucent at 0.04 bpp
-    (65 KB) within 4 % either way; neither the bits a pixel
-    nor the bytes a frame separated them (seahorse at 0.1 bpp, 2.2 KB a frame, faster on
-    one; toys_array q50, 2.0 KB a frame, on two). A ``prediction`` residual decodes beside
-    the warp, which keeps both cores busy: one thread was faster at every rate measured
-    (synthetic 0.01-0.12 bpp, lytro_bikes 0.15 and 0.40: 2-7 %)."""
+    (65 KB) within 4 % either way; neither the bits a pixel nor the bytes a frame separated
+    them (seahorse at 0.1 bpp, 2.2 KB a frame, faster on one; toys_array q50, 2.0 KB a
+    frame, on two). A ``prediction`` residual decodes beside the warp, which keeps both
+    cores busy: one thread was faster at every rate measured (synthetic 0.01-0.12 bpp,
+    lytro_bikes 0.15 and 0.40: 2-7 %)."""
     if fmt == RESIDUAL_FORMAT:
         return 1
     return _DECODER_THREADS if nbytes >= _THREADED_MIN_BYTES else 1

@@ -411,6 +411,7 @@ def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, o
         view_disp = np.zeros((0, 0, 1, 1), np.float32)
     share = splat.mean(axis=-1)
     threads = numba.get_num_threads()
+    order, starts = deal_views(offsets, share, threads)
     out = np.empty((u, v, h, w * c), np.uint8)
     packed = np.empty((h + 2) * (w + 2), np.uint64)  # with a one-pixel border (pack_lanes)
     src, d, view_disp = read_only(src), read_only(d), read_only(view_disp)  # one signature (read_only)
@@ -422,13 +423,12 @@ def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, o
             warp_all_views(packed, c, ch0, n_ch, d, view_disp, offsets, splat, reach, gains, rows, row_w, cols,
                            col_w, order, starts, out)
 
-        rest = None
+        # beside other work: one pass only (the views of a single channel triple)
         if beside is not None and threads > 1 and c <= _LANES and not beside.done():
             ranked, _ = deal_views(offsets, share, 1)  # the costliest view first
-            done = _warp_beside(beside, ranked, warp)
-            rest = ranked[done:]
-        if rest is None or len(rest):
-            warp(*deal_views(offsets, share, threads, rest))
+            order, starts = deal_views(offsets, share, threads, ranked[_warp_beside(beside, ranked, warp):])
+        if len(order):
+            warp(order, starts)
     return out.reshape(u, v, h, w, c)
 
 
