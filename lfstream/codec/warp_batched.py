@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from lfstream.codec import warp as _warp
-from lfstream.codec.warp import _check_views, _linear_taps, _rows_from_bounds, splat_reach
+from lfstream.codec.warp import _check_views, _linear_taps
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import view_offsets
 
@@ -90,6 +90,59 @@ def _row_fold_bounds(d: torch.Tensor) -> torch.Tensor:
         a, c = d[..., :-1, :], d[..., 1:, :]
         out[:, 1, :-1] = ((c - a).abs() * torch.maximum(a.abs(), c.abs())).amax(dim=-1)[:, 0]
     return out
+
+
+def _window_max(a: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
+    """``out[b, k, y] = max(a[b, y - r : y + r + 1])`` with ``r = reach[b, k]``, the window
+    clipped at the ends (:func:`lfstream.codec.warp._window_max`, every frame and reach at
+    once): a sparse table of maxima over runs of 2^j rows, two lookups a window. Maxima are
+    exact, so the values are the host's.
+
+    Shape:
+        - a: ``(B, H)``; reach: ``(B, N)`` int64; output: ``(B, N, H)``
+    """
+    b, h = a.shape
+    levels = [a]
+    span = 1
+    while 2 * span <= h:  # levels[j][i] = max(a[i : i + 2^j]), where that run fits
+        prev = levels[-1]
+        nxt = prev.clone()
+        nxt[:, :h - span] = torch.maximum(prev[:, :h - span], prev[:, span:])
+        levels.append(nxt)
+        span *= 2
+    table = torch.stack(levels).reshape(-1)  # (L, B, H) flat
+    y = torch.arange(h, device=a.device).view(1, 1, h)
+    r = reach.clamp(max=h).unsqueeze(-1)
+    lo = (y - r).clamp(min=0)
+    hi = (y + r).clamp(max=h - 1)
+    length = hi - lo + 1
+    j = torch.floor(torch.log2(length.double())).long()  # then corrected: log2 of an int may round
+    j = j + (torch.bitwise_left_shift(torch.ones_like(j), j + 1) <= length).long()
+    j = j - (torch.bitwise_left_shift(torch.ones_like(j), j) > length).long()
+    frame = torch.arange(b, device=a.device).view(b, 1, 1)
+    base = (j * b + frame) * h
+    return torch.maximum(table[base + lo], table[base + hi - torch.bitwise_left_shift(torch.ones_like(j), j) + 1])
+
+
+def _splat_rows(d: torch.Tensor, offsets: np.ndarray, tolerance: float) -> torch.Tensor:
+    """The view rows each frame splats (:func:`lfstream.codec.warp.splat_rows`) on the maps'
+    device, every frame at once: the same float32 fold bounds as the CPU kernel's, the same
+    float64 windows and test (:func:`lfstream.codec.warp._rows_from_bounds`), and no trip to
+    the host (deciding it there frame by frame was 5 ms of a 30-frame call).
+
+    Shape:
+        - d: ``(B, 1, H, W)`` finite float32; offsets: ``(N, 2)``; output: ``(B, N, H)`` bool
+    """
+    bounds = _row_fold_bounds(d).double()  # (B, 2, H)
+    off = torch.from_numpy(np.abs(np.asarray(offsets, np.float64))).to(d.device)
+    du, dv = off[:, 0], off[:, 1]
+    dmax = d.abs().flatten(1).amax(dim=1).double()  # float32 max, as splat_reach(float(...)) gets it
+    reach = (torch.ceil(torch.clamp(du[None] * dmax[:, None], max=1e9) + 0.5) + 1).long()  # splat_reach
+    mx = _window_max(bounds[:, 0], reach)
+    my = _window_max(bounds[:, 1], reach)
+    a, c = du.view(1, -1, 1), dv.view(1, -1, 1)
+    moving = ((du > 0) | (dv > 0)).view(1, -1, 1)
+    return moving & (torch.hypot(a, c) * (a * my + c * mx) > tolerance)
 
 
 def _fill_holes(maps: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
@@ -206,9 +259,6 @@ def warp_views_batched(
         view_disparities = view_disparities.to(dev, torch.float32).reshape(b, u * v, h, w)
     grid_offsets = view_offsets((u, v), axes).reshape(-1, 2)
     offsets = torch.from_numpy(grid_offsets).to(dev)
-    # the padded centre views, one int32 plane per channel, flat: a tap is one index
-    padded = torch.nn.functional.pad(centres.permute(0, 3, 1, 2).float(), (1, 1, 1, 1), mode="replicate")
-    src = padded.to(torch.int32).reshape(b, c, (h + 2) * (w + 2))
     has_gains = None  # (B,) bool: the frames warped with their gains
     if gains is not None:
         gains = gains.to(dev, torch.float32)
@@ -220,23 +270,16 @@ def warp_views_batched(
         rows, row_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(h, gains.shape[3]))
         cols, col_w = (torch.from_numpy(a).to(dev) for a in _linear_taps(w, gains.shape[4]))
         gains = gains.reshape(b, u * v, *gains.shape[3:])
-    # (B, U*V) bool, the views each frame splats (on the device; on the host), and (B, U*V, H)
-    # bool, their rows (on the device)
-    splat = splat_host = splat_rows = None
+    # (B, U*V, H) bool, the rows each view splats, and (B, U*V) bool, the views that splat any
+    # (on the host: which passes need the splat, read once, not one device sync a pass)
+    splat_host = splat_rows = None
     if occlusion and view_disparities is None:
-        # the rows each view splats (lfstream.codec.warp.splat_rows), decided on the host from
-        # the same float32 bounds as the CPU kernel's; the splat itself runs over every row
-        bounds = _row_fold_bounds(d).cpu().numpy()
-        dmax = d.abs().flatten(1).amax(dim=1).cpu().numpy()
-        rows_host = np.stack([_rows_from_bounds(bd[0], bd[1], splat_reach(float(m), grid_offsets), grid_offsets,
-                                                _warp.SPLAT_TOLERANCE_PX)
-                              for bd, m in zip(bounds, dmax)]).reshape(b, u * v, h)
-        splat_host = rows_host.any(axis=-1)
-        splat = torch.from_numpy(splat_host).to(dev)
-        splat_rows = torch.from_numpy(rows_host).to(dev)  # (B, U*V, H)
+        splat_rows = _splat_rows(d, grid_offsets, _warp.SPLAT_TOLERANCE_PX)
+        splat_host = splat_rows.any(dim=-1).cpu().numpy()
     out = torch.empty((b, u * v, h, w, c), dtype=torch.uint8, device=dev)
     step = max(1, chunk_pixels // max(1, b * h * w))
     fused = _fused_warp(dev)
+    src = None
     if fused is not None:
         centres = centres.contiguous()
         if gains is not None:
@@ -254,11 +297,13 @@ def warp_views_batched(
         dv = offsets[k0:k1, 1].view(1, n, 1, 1)
         if view_disparities is not None:
             maps = view_disparities[:, k0:k1]
-        elif splat is not None and splat_host[:, k0:k1].any():  # the host copy: no device sync per pass
-            if fused is not None:
-                maps = fused.splat_maps(d, offsets, splat, k0, n)
-            else:
-                maps = _fill_holes(_splat(d, du, dv), d)
+        elif splat_host is not None and splat_host[:, k0:k1].any():
+            if fused is not None:  # the splatted rows only; the warp samples the others with d
+                fused.warp_pixels(centres, fused.splat_maps(d, offsets, splat_rows, k0, n), out, offsets, k0, gains,
+                                  has_gains, None if gains is None else (rows, row_w),
+                                  None if gains is None else (cols, col_w), centre_maps=d, splat_rows=splat_rows)
+                continue
+            maps = _fill_holes(_splat(d, du, dv), d)
             maps = torch.where(splat_rows[:, k0:k1, :, None], maps, d)  # rows not splatted: the centre map
         else:
             maps = d.expand(b, n, h, w)
@@ -266,6 +311,9 @@ def warp_views_batched(
             fused.warp_pixels(centres, maps, out, offsets, k0, gains, has_gains,
                               None if gains is None else (rows, row_w), None if gains is None else (cols, col_w))
             continue
+        if src is None:  # the padded centre views, one int32 plane per channel, flat: a tap is one index
+            padded = torch.nn.functional.pad(centres.permute(0, 3, 1, 2).float(), (1, 1, 1, 1), mode="replicate")
+            src = padded.to(torch.int32).reshape(b, c, (h + 2) * (w + 2))
         ix = _floor_int(_fma(maps, dv, xs) * float(_FRAC) + 0.5, float(_TAP_OFFSET))
         iy = _floor_int(_fma(maps, du, ys) * float(_FRAC) + 0.5, float(_TAP_OFFSET))
         fx = ix & (_FRAC - 1)

@@ -35,8 +35,9 @@ _BLOCK = 512
 
 @triton.jit
 def _warp_kernel(centre_ptr, maps_ptr, out_ptr, du_ptr, dv_ptr, gains_ptr, flags_ptr, rows_ptr, row_w_ptr, cols_ptr,
-                 col_w_ptr, H, W, VIEW0, s_mb, s_mn, s_ob, s_gb, s_gn, s_gh, s_gw,
-                 C: tl.constexpr, CP: tl.constexpr, CG: tl.constexpr, HAS_GAINS: tl.constexpr, BLOCK: tl.constexpr):
+                 col_w_ptr, d_ptr, splat_ptr, H, W, VIEW0, NV, s_mb, s_mn, s_ob, s_gb, s_gn, s_gh, s_gw,
+                 C: tl.constexpr, CP: tl.constexpr, CG: tl.constexpr, HAS_GAINS: tl.constexpr, HAS_ROWS: tl.constexpr,
+                 BLOCK: tl.constexpr):
     pid = tl.program_id(0)
     k = tl.program_id(1).to(tl.int64)  # view of this pass (64-bit: offsets past 2^31 elements)
     b = tl.program_id(2).to(tl.int64)  # frame
@@ -44,7 +45,12 @@ def _warp_kernel(centre_ptr, maps_ptr, out_ptr, du_ptr, dv_ptr, gains_ptr, flags
     inside = p < H * W
     y = p // W
     x = p - y * W
-    m = tl.load(maps_ptr + b * s_mb + k * s_mn + p, mask=inside, other=0.0)
+    if HAS_ROWS:  # splatted rows from the maps, the others from the centre map d
+        splatted = tl.load(splat_ptr + (b * NV + VIEW0 + k) * H + y, mask=inside, other=0) != 0
+        m = tl.where(splatted, tl.load(maps_ptr + b * s_mb + k * s_mn + p, mask=inside & splatted, other=0.0),
+                     tl.load(d_ptr + b * H * W + p, mask=inside & ~splatted, other=0.0))
+    else:
+        m = tl.load(maps_ptr + b * s_mb + k * s_mn + p, mask=inside, other=0.0)
     du = tl.load(du_ptr + VIEW0 + k)
     dv = tl.load(dv_ptr + VIEW0 + k)
     # positions in 1/1024 px, floored from -64 px on (the kernel's _floor_int); * 1024 is exact
@@ -112,9 +118,22 @@ def _min(a, b):
 
 
 @triton.jit
-def _splat_kernel(d_ptr, maps_ptr, du_ptr, dv_ptr, flags_ptr, H, W, VIEW0, NV, N, BLOCK: tl.constexpr):
-    """Every centre pixel to its nearest view pixel; the larger disparity wins (an atomic
-    max: the result does not depend on the order). Views whose flag is 0 are left alone."""
+def _init_kernel(maps_ptr, splat_ptr, H, W, VIEW0, NV, N, BLOCK_W: tl.constexpr):
+    """The rows of one view that splat marked as holes (the others are never read)."""
+    y = tl.program_id(0)
+    k = tl.program_id(1)
+    b = tl.program_id(2).to(tl.int64)
+    pos = tl.arange(0, BLOCK_W)
+    splatted = tl.load(splat_ptr + (b * NV + VIEW0 + k) * H + y) != 0
+    tl.store(maps_ptr + ((b * N + k) * H + y) * W + pos, tl.full((BLOCK_W,), -3.0e38, tl.float32),
+             mask=(pos < W) & splatted)
+
+
+@triton.jit
+def _splat_kernel(d_ptr, maps_ptr, du_ptr, dv_ptr, flags_ptr, splat_ptr, H, W, VIEW0, NV, N, BLOCK: tl.constexpr):
+    """Every centre pixel to its nearest view pixel in a row that splats; the larger disparity
+    wins (an atomic max: the result does not depend on the order). Views whose flag is 0 are
+    left alone."""
     pid = tl.program_id(0)
     k = tl.program_id(1)
     b = tl.program_id(2).to(tl.int64)
@@ -131,22 +150,22 @@ def _splat_kernel(d_ptr, maps_ptr, du_ptr, dv_ptr, flags_ptr, H, W, VIEW0, NV, N
     iy = (tl.minimum(tl.maximum(ty, 1.0 - 1024.0), 1.0e9) + 1024.0).to(tl.int32) - 1024
     ix = (tl.minimum(tl.maximum(tx, 1.0 - 1024.0), 1.0e9) + 1024.0).to(tl.int32) - 1024
     ok = inside & (flag != 0) & (iy >= 0) & (iy < H) & (ix >= 0) & (ix < W)
+    ok = ok & (tl.load(splat_ptr + (b * NV + VIEW0 + k) * H + iy, mask=ok, other=0) != 0)
     tl.atomic_max(maps_ptr + (b * N + k) * H * W + iy * W + ix, m, mask=ok)
 
 
 @triton.jit
-def _fill_kernel(d_ptr, maps_ptr, flags_ptr, H, W, VIEW0, NV, N, BLOCK_W: tl.constexpr):
-    """One row of one view: each hole takes its nearest splatted neighbour on the background
-    side (the smaller disparity, the left one on a tie), the one neighbour it has, or the
-    centre map where the row has none; a view whose flag is 0 gets the centre map."""
+def _fill_kernel(d_ptr, maps_ptr, splat_ptr, H, W, VIEW0, NV, N, BLOCK_W: tl.constexpr):
+    """One row of one view that splats: each hole takes its nearest splatted neighbour on the
+    background side (the smaller disparity, the left one on a tie), the one neighbour it has,
+    or the centre map where the row has none. Rows that do not splat are left alone."""
     y = tl.program_id(0)
     k = tl.program_id(1)
     b = tl.program_id(2).to(tl.int64)
     pos = tl.arange(0, BLOCK_W)
-    inside = pos < W
+    inside = (pos < W) & (tl.load(splat_ptr + (b * NV + VIEW0 + k) * H + y) != 0)
     row = maps_ptr + ((b * N + k) * H + y) * W
     centre = tl.load(d_ptr + (b * H + y) * W + pos, mask=inside, other=0.0)
-    flag = tl.load(flags_ptr + b * NV + VIEW0 + k)
     val = tl.load(row + pos, mask=inside, other=-3.0e38)
     hole = val <= -1.0e38
     left = tl.associative_scan(tl.where(hole, -1, pos), 0, _max)
@@ -156,39 +175,44 @@ def _fill_kernel(d_ptr, maps_ptr, flags_ptr, H, W, VIEW0, NV, N, BLOCK_W: tl.con
     dl = tl.load(row + tl.maximum(left, 0), mask=inside, other=0.0)
     dr = tl.load(row + tl.minimum(right, W - 1), mask=inside, other=0.0)
     fill = tl.where(has_l & has_r, tl.where(dl <= dr, dl, dr), tl.where(has_l, dl, tl.where(has_r, dr, centre)))
-    tl.store(row + pos, tl.where(flag != 0, tl.where(hole, fill, val), centre), mask=inside)
+    tl.store(row + pos, tl.where(hole, fill, val), mask=inside)
 
 
-def splat_maps(d: torch.Tensor, offsets: torch.Tensor, splat: torch.Tensor, view0: int, n: int) -> torch.Tensor:
-    """Views ``view0 ... view0 + n - 1``'s disparity maps: the centre maps ``d`` forward-splatted
-    (z-tested) and hole-filled where ``splat`` says, the centre map elsewhere
-    (:func:`lfstream.codec.warp_batched._splat` and ``_fill_holes``, in two kernels).
+def splat_maps(d: torch.Tensor, offsets: torch.Tensor, splat_rows: torch.Tensor, view0: int, n: int) -> torch.Tensor:
+    """Views ``view0 ... view0 + n - 1``'s disparity maps in the rows ``splat_rows`` names: the
+    centre maps ``d`` forward-splatted (z-tested) and hole-filled
+    (:func:`lfstream.codec.warp_batched._splat` and ``_fill_holes``, in three kernels); the
+    other rows are left unwritten (:func:`warp_pixels` reads ``d`` there).
 
     Args:
         d: ``(B, 1, H, W)`` float32 centre maps.
         offsets: ``(U*V, 2)`` float32 displacement per unit disparity.
-        splat: ``(B, U*V)`` bool, the views each frame splats.
+        splat_rows: ``(B, U*V, H)`` bool, the rows each view of each frame splats.
 
     Shape:
         - output: ``(B, n, H, W)`` float32
     """
     b, _, h, w = d.shape
-    maps = torch.full((b, n, h, w), -3.0e38, dtype=torch.float32, device=d.device)
-    flags = splat.to(torch.int8).contiguous()
+    maps = torch.empty((b, n, h, w), dtype=torch.float32, device=d.device)
+    rows = splat_rows.contiguous().view(torch.int8)
+    flags = splat_rows.any(dim=-1).to(torch.int8)
+    nv = rows.shape[1]
     d = d.contiguous()
     du = offsets[:, 0].contiguous()
     dv = offsets[:, 1].contiguous()
-    _splat_kernel[(triton.cdiv(h * w, _BLOCK), n, b)](d, maps, du, dv, flags, h, w, view0, flags.shape[1], n,
-                                                        BLOCK=_BLOCK, enable_fp_fusion=False)
     # the rows are the cheap axis of the grid: the x dimension takes any count
-    _fill_kernel[(h, n, b)](d, maps, flags, h, w, view0, flags.shape[1], n, BLOCK_W=triton.next_power_of_2(w))
+    _init_kernel[(h, n, b)](maps, rows, h, w, view0, nv, n, BLOCK_W=triton.next_power_of_2(w))
+    _splat_kernel[(triton.cdiv(h * w, _BLOCK), n, b)](d, maps, du, dv, flags, rows, h, w, view0, nv, n,
+                                                        BLOCK=_BLOCK, enable_fp_fusion=False)
+    _fill_kernel[(h, n, b)](d, maps, rows, h, w, view0, nv, n, BLOCK_W=triton.next_power_of_2(w))
     return maps
 
 
 def warp_pixels(centres: torch.Tensor, maps: torch.Tensor, out: torch.Tensor, offsets: torch.Tensor, view0: int,
                 gains: torch.Tensor | None = None, has_gains: torch.Tensor | None = None,
                 row_taps: tuple[torch.Tensor, torch.Tensor] | None = None,
-                col_taps: tuple[torch.Tensor, torch.Tensor] | None = None) -> None:
+                col_taps: tuple[torch.Tensor, torch.Tensor] | None = None, centre_maps: torch.Tensor | None = None,
+                splat_rows: torch.Tensor | None = None) -> None:
     """Views ``view0 ... view0 + n - 1`` of every frame, written into ``out``.
 
     Args:
@@ -201,6 +225,9 @@ def warp_pixels(centres: torch.Tensor, maps: torch.Tensor, out: torch.Tensor, of
         gains: ``(B, U*V, gh, gw, 1 or C)`` float32 gain grids (last dimension contiguous), and
             ``has_gains`` ``(B,)`` bool, the frames they apply to; ``row_taps`` / ``col_taps``:
             OpenCV's INTER_LINEAR taps ``((H, 2) int64, (H,) float32)`` and the same along x.
+        centre_maps, splat_rows: ``(B, 1, H, W)`` float32 and ``(B, U*V, H)`` bool: rows of
+            ``maps`` (from :func:`splat_maps`) are read where ``splat_rows`` is set, the
+            centre map elsewhere; ``None``: ``maps`` everywhere.
 
     Shape:
         - out: ``(B, U*V, H, W, C)``
@@ -225,8 +252,15 @@ def warp_pixels(centres: torch.Tensor, maps: torch.Tensor, out: torch.Tensor, of
         row_w = col_w = gains = torch.zeros(2, dtype=torch.float32, device=centres.device)
         gstride = (0, 0, 0, 0)
         cg = 1
+    with_rows = splat_rows is not None and centre_maps is not None
+    if with_rows:
+        d = centre_maps.contiguous()
+        splatted = splat_rows.contiguous().view(torch.int8)
+        nv = splatted.shape[1]
+    else:  # unused pointers
+        d, splatted, nv = maps, flags, 0
     grid = (triton.cdiv(h * w, _BLOCK), n, b)
-    _warp_kernel[grid](centres, maps, out, du, dv, gains, flags, rows, row_w, cols, col_w, h, w, view0,
+    _warp_kernel[grid](centres, maps, out, du, dv, gains, flags, rows, row_w, cols, col_w, d, splatted, h, w, view0, nv,
                        maps.stride(0), maps.stride(1), out.stride(0), *gstride[:4],
-                       C=c, CP=triton.next_power_of_2(c), CG=cg, HAS_GAINS=with_gains, BLOCK=_BLOCK,
-                       enable_fp_fusion=False)
+                       C=c, CP=triton.next_power_of_2(c), CG=cg, HAS_GAINS=with_gains, HAS_ROWS=with_rows,
+                       BLOCK=_BLOCK, enable_fp_fusion=False)

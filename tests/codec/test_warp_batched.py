@@ -10,8 +10,8 @@ import torch
 import lfstream
 from lfstream.codec._kernels import fold_bounds, row_fold_bounds
 from lfstream.codec.decoder import Decoder, iter_decode
-from lfstream.codec.warp import splat_views, view_disparities, warp_views, warp_views_per_view
-from lfstream.codec.warp_batched import _row_fold_bounds, warp_views_batched
+from lfstream.codec.warp import splat_rows, splat_views, view_disparities, warp_views, warp_views_per_view
+from lfstream.codec.warp_batched import _row_fold_bounds, _splat_rows, _window_max, warp_views_batched
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import view_offsets
 from lfstream.synth import synth_clip
@@ -60,6 +60,35 @@ def test_the_same_views_skip_the_splat_as_on_the_kernel(rng):
     got = _batched([centre, centre], [gentle, steep], (7, 5))
     assert (got[0] == warp_views(centre, gentle, (7, 5))).all()
     assert (got[1] == warp_views(centre, steep, (7, 5))).all()
+
+
+@pytest.mark.parametrize("views,size", [((7, 7), (60, 80)), ((5, 3), (30, 40)), ((9, 9), (8, 5)), ((7, 5), (1, 6)),
+                                        ((3, 3), (6, 1))])
+def test_the_splat_rows_decided_on_the_device_are_the_hosts(views, size, rng):
+    """Every frame's view rows at once on the maps' device (no trip to the host) against
+    splat_rows frame by frame: flat, noisy, gentle, huge and stepped maps, in one batch."""
+    h, w = size
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    step = np.zeros(size, np.float32)
+    step[h // 2:] = 3.0
+    maps = [np.zeros(size, np.float32), rng.normal(0, 1.5, size).astype(np.float32),
+            rng.normal(0, 0.02, size).astype(np.float32), (0.9 * np.sin(xs / 7.0) * np.cos(ys / 5.0)).astype(np.float32),
+            rng.normal(0, 40, size).astype(np.float32), step]
+    offsets = view_offsets(views)
+    got = _splat_rows(torch.from_numpy(np.stack(maps))[:, None], offsets.reshape(-1, 2), 1.0).numpy()
+    ref = np.stack([splat_rows(d, offsets).reshape(-1, h) for d in maps])
+    np.testing.assert_array_equal(got, ref)
+
+
+def test_window_max_is_the_clipped_window_maximum(rng):
+    a = torch.from_numpy(rng.random((3, 37)))
+    reach = torch.from_numpy(rng.integers(0, 45, (3, 6)))
+    got = _window_max(a, reach).numpy()
+    for f in range(3):
+        for k in range(6):
+            r = int(reach[f, k])
+            ref = [a[f, max(0, y - r):y + r + 1].max().item() for y in range(37)]
+            np.testing.assert_array_equal(got[f, k], ref)
 
 
 def test_view_axes_and_a_ragged_grid():
@@ -180,3 +209,40 @@ def test_the_fused_cuda_kernel_agrees_with_the_tensor_path(case, rng, monkeypatc
         for k in range(3):
             g = None if "gains" not in kw else kw["gains"][k].cpu().numpy()
             _assert_within_a_level(fused[k], warp_views(centres[k].cpu().numpy(), disps[k], (7, 5), gains=g))
+
+
+_INTERPRETED = """
+import numpy as np, torch
+from lfstream.codec import warp_batched, warp_triton
+from lfstream.synth import synth_clip
+clip = synth_clip(1, 5, (13, 17), seed=13, layers=3, motion=0, camera_pan=0, disparity_range=(-1.6, 2.2))
+centre = clip.lf[0, 2, 2]
+rng = np.random.default_rng(0)
+ys, xs = np.mgrid[0:13, 0:17].astype(np.float32)
+d = torch.from_numpy(np.stack([clip.disparity[0, 2, 2].astype(np.float32),
+                               (0.9 * np.sin(xs / 3.0) * np.cos(ys / 2.0)).astype(np.float32)]))
+centres = torch.from_numpy(np.stack([centre, centre[::-1].copy()]))
+gains = torch.from_numpy(rng.uniform(0.75, 1.25, (2, 5, 3, 3, 4, 1)).astype(np.float32))
+outs = []
+for fused in (warp_triton, None):
+    warp_batched._fused_warp = lambda device, fused=fused: fused
+    outs.append([warp_batched.warp_views_batched(centres, d, (5, 3), **kw).numpy()
+                 for kw in ({}, {"gains": gains}, {"chunk_pixels": 13 * 17 * 2 * 4})])
+for a, b in zip(*outs):
+    assert np.array_equal(a, b), np.abs(a.astype(int) - b.astype(int)).max()
+print("same bytes")
+"""
+
+
+def test_the_triton_kernels_in_the_interpreter_give_the_tensor_paths_bytes():
+    """The CUDA kernels (lfstream/codec/warp_triton.py) run by Triton's interpreter on the CPU,
+    where Triton is installed (CUDA builds of torch bring it): frames that splat some rows and
+    not others, gains, several passes; the bytes of the tensor path."""
+    pytest.importorskip("triton")
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "TRITON_INTERPRET": "1"}
+    done = subprocess.run([sys.executable, "-c", _INTERPRETED], env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0 and "same bytes" in done.stdout, done.stderr[-2000:]
