@@ -10,7 +10,7 @@ neighbour on the background side (the smaller disparity; a row nothing landed on
 centre map), bilinear sampling in 1/1024-pixel fixed point with the border replicated, the
 per-view gain maps bilinearly up-sampled (OpenCV's INTER_LINEAR taps) and multiplied in.
 On a CUDA device where Triton imports, the same steps run as three fused kernels
-(:mod:`lfstream.codec.warp_triton`: 130 -> 1,397 LF/s of 7x7x375x540 on an H100).
+(:mod:`lfstream.codec.warp_triton`: 130 -> 1,710 LF/s of 7x7x375x540 on an H100).
 Integer steps are exact; the splat and tap positions round once, as the kernel's fused
 multiply-adds do, so without gains the bytes are the kernel's. In the gain blend not every
 choice of the kernel's compiler is reproduced: about one sample in 10^6 moves by a level

@@ -1,5 +1,5 @@
-"""The batched warp on a CUDA device as three Triton kernels: the z-tested forward splat,
-the row-wise hole filling, and the per-pixel warp.
+"""The batched warp on a CUDA device as Triton kernels: the splatting rows marked as holes,
+the z-tested forward splat into them, their row-wise hole filling, and the per-pixel warp.
 
 :func:`lfstream.codec.warp_batched.warp_views_batched` written as torch operations moves
 every intermediate (tap positions, int64 indices, four gathered taps per channel, float64
@@ -8,6 +8,10 @@ of 7x7x375x540 on an H100 (2026-11-25, 30 light fields a call; writing the outpu
 the card's ~3 TB/s would take 0.01 ms a light field). With this module: 1,397 LF/s (30 a
 call), 1,774 (120 a call); without the splat (every view from the centre map) 2,306 and
 2,696 (``bench/batched_warp.py``; the per-pixel kernel alone lifted the torch path to 355).
+Since 2026-11-27 (the splat's rows decided on the device and only those splatted, the
+per-pixel kernel's launch settings below): 1,710 LF/s at 30 a call in the harness's timing
+(1,506 with the previous launch settings on the same machine; the 2026-11-25 code ran at
+1,133 on another H100, alternating with the new rows' code at 1,600).
 
 The per-pixel kernel does a view pixel's whole chain in registers: the view's disparity
 (the centre map, a splatted map or Depth-Net's, given as ``maps``), the tap position in
@@ -29,8 +33,18 @@ import torch
 import triton
 import triton.language as tl
 
-#: view pixels per program
-_BLOCK = 512
+#: view pixels per program of the per-pixel warp, and centre pixels per program of the splat
+#: (H100, 30 light fields of 7x7x375x540 a call, each setting alternated with the others in
+#: one process, 20 rounds: the warp with 256 pixels and 8 warps a program 20.1 -> 17.5 ms a
+#: call; 1024 pixels or 2 warps 1.6x slower; the splat's and the row kernels' settings within
+#: 1.5 %, their defaults kept; the same bytes with every setting)
+_BLOCK = 256
+_SPLAT_BLOCK = 512
+#: warps per program (Triton's default is 4) of the per-pixel warp, the splat, and the two
+#: row kernels (marking a row's holes, filling them)
+_WARP_WARPS = 8
+_SPLAT_WARPS = 4
+_ROW_WARPS = 4
 
 
 @triton.jit
@@ -201,10 +215,11 @@ def splat_maps(d: torch.Tensor, offsets: torch.Tensor, splat_rows: torch.Tensor,
     du = offsets[:, 0].contiguous()
     dv = offsets[:, 1].contiguous()
     # the rows are the cheap axis of the grid: the x dimension takes any count
-    _init_kernel[(h, n, b)](maps, rows, h, w, view0, nv, n, BLOCK_W=triton.next_power_of_2(w))
-    _splat_kernel[(triton.cdiv(h * w, _BLOCK), n, b)](d, maps, du, dv, flags, rows, h, w, view0, nv, n,
-                                                        BLOCK=_BLOCK, enable_fp_fusion=False)
-    _fill_kernel[(h, n, b)](d, maps, rows, h, w, view0, nv, n, BLOCK_W=triton.next_power_of_2(w))
+    _init_kernel[(h, n, b)](maps, rows, h, w, view0, nv, n, BLOCK_W=triton.next_power_of_2(w), num_warps=_ROW_WARPS)
+    _splat_kernel[(triton.cdiv(h * w, _SPLAT_BLOCK), n, b)](d, maps, du, dv, flags, rows, h, w, view0, nv, n,
+                                                              BLOCK=_SPLAT_BLOCK, enable_fp_fusion=False,
+                                                              num_warps=_SPLAT_WARPS)
+    _fill_kernel[(h, n, b)](d, maps, rows, h, w, view0, nv, n, BLOCK_W=triton.next_power_of_2(w), num_warps=_ROW_WARPS)
     return maps
 
 
@@ -263,4 +278,4 @@ def warp_pixels(centres: torch.Tensor, maps: torch.Tensor, out: torch.Tensor, of
     _warp_kernel[grid](centres, maps, out, du, dv, gains, flags, rows, row_w, cols, col_w, d, splatted, h, w, view0, nv,
                        maps.stride(0), maps.stride(1), out.stride(0), *gstride[:4],
                        C=c, CP=triton.next_power_of_2(c), CG=cg, HAS_GAINS=with_gains, HAS_ROWS=with_rows,
-                       BLOCK=_BLOCK, enable_fp_fusion=False)
+                       BLOCK=_BLOCK, enable_fp_fusion=False, num_warps=_WARP_WARPS)
