@@ -166,6 +166,23 @@ def test_the_decoder_warps_a_batch_on_the_device(monkeypatch):
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_the_decoder_on_cuda_gives_the_cpu_decode():
+    """The whole decode on a CUDA device (the batch's centre views side by side, the warp on
+    the device, the light fields back through page-locked memory) against the CPU decode:
+    every frame, within a level, the frames independent of each other once yielded."""
+    clip = synth_clip(4, 5, (40, 52), seed=9, noise=1.0, vignetting=0.3)
+    data = lfstream.encode(clip.lf)
+    ref = list(iter_decode(io.BytesIO(data), hance="off"))
+    got = list(iter_decode(io.BytesIO(data), hance="off", device="cuda", batch=3))
+    assert [fr.seq for fr in got] == [fr.seq for fr in ref]
+    for a, b in zip(got, ref):
+        assert isinstance(a.lf, np.ndarray) and a.lf.dtype == np.uint8
+        _assert_within_a_level(a.lf, b.lf)
+    got[0].lf[...] = 0  # a frame's memory is its own
+    assert not (got[1].lf == 0).all()
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 def test_cuda_agrees_with_the_cpu(rng):
     centre, disp = _scene(6)
     gains = torch.from_numpy(rng.uniform(0.8, 1.2, (1, 5, 5, 3, 3, 3)).astype(np.float32))
