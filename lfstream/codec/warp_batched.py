@@ -250,6 +250,8 @@ def warp_views_batched(
         raise LFShapeError(f"disparities: expected {(b, h, w)}, got {tuple(disparities.shape)}")
     u, v = _check_views(views)
     dev = centres.device
+    if b == 0:  # an empty batch: nothing to warp (no frame maxima to take)
+        return torch.empty((0, u, v, h, w, c), dtype=torch.uint8, device=dev)
     d = disparities.to(dev, torch.float32).reshape(b, 1, h, w)
     if not torch.isfinite(d).all():
         raise LFValueError("disparities: NaN or Inf")

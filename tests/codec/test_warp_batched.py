@@ -135,6 +135,11 @@ def test_huge_disparities_clamp_to_the_border():
         assert (out[1, 1] == centre).all()
 
 
+def test_an_empty_batch_gives_an_empty_batch():
+    out = warp_views_batched(torch.zeros((0, 8, 9, 3), dtype=torch.uint8), torch.zeros((0, 8, 9)), (3, 5))
+    assert out.shape == (0, 3, 5, 8, 9, 3) and out.dtype == torch.uint8
+
+
 def test_bad_input_names_the_parameter():
     centre, disp = _scene(4, size=(12, 14), views=3)
     c, d = torch.from_numpy(centre[None]), torch.from_numpy(disp[None])
