@@ -54,7 +54,9 @@ BATCH_RANGE = (1, 256)
 BESIDE_MIN_BITS = 0.015
 #: Threads that decode a batch's centre views (JPEG decode and post-filter, or AV1) side by
 #: side: the cores. On an H100 machine (16 cores) a 30-frame batch spent 141 of its 242 ms
-#: there one frame after another, the warp on the GPU 52 ms.
+#: there one frame after another (the warp on the GPU 52 ms); side by side the whole decode
+#: ran 1.83x faster (1.75x with JPEG-Hance). On the 2-core dev box: AV1 centres 1.48x, JPEG
+#: ones unchanged (OpenCV's filter already uses both cores). Batches of one are decoded inline.
 CENTRE_WORKERS = max(1, os.cpu_count() or 1)
 
 
@@ -370,11 +372,11 @@ class Decoder:
         return frames
 
 
-def _to_host(tensor):
+def _to_host(tensor) -> np.ndarray:
     """A device tensor's values as a numpy array. From a CUDA device through page-locked memory
     from torch's caching host allocator: a batch's light fields (30 of 7x7x375x540: 893 MB)
-    copied into fresh pageable memory took 688 ms on an H100 machine, against 34 ms into
-    reused page-locked buffers (2026-11-25); once the frames of a batch are released, the
+    copied into fresh pageable memory took 688 ms on an H100 machine (2026-11-25), into a
+    block of that allocator 31 ms (2026-11-27); once the frames of a batch are released, the
     next batch reuses their block. Elsewhere ``.cpu()``."""
     import torch
 
