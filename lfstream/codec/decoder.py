@@ -382,7 +382,10 @@ def _to_host(tensor) -> np.ndarray:
 
     if tensor.device.type != "cuda":
         return tensor.cpu().numpy()
-    host = torch.empty(tensor.shape, dtype=tensor.dtype, pin_memory=True)
+    try:
+        host = torch.empty(tensor.shape, dtype=tensor.dtype, pin_memory=True)
+    except RuntimeError:  # page-locked memory refused (its limit, or a huge batch): the plain copy
+        return tensor.cpu().numpy()
     host.copy_(tensor)
     return host.numpy()
 

@@ -268,3 +268,25 @@ def test_the_triton_kernels_in_the_interpreter_give_the_tensor_paths_bytes():
     env = {**os.environ, "TRITON_INTERPRET": "1"}
     done = subprocess.run([sys.executable, "-c", _INTERPRETED], env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0 and "same bytes" in done.stdout, done.stderr[-2000:]
+
+
+def test_the_copy_to_the_host_falls_back_where_page_locked_memory_is_refused(monkeypatch):
+    """A batch too large for page-locked memory (or a host that refuses it) is copied to the
+    host the plain way, with the same values."""
+    from lfstream.codec import decoder
+
+    values = torch.arange(24, dtype=torch.uint8).reshape(2, 3, 4)
+
+    class OnCuda:  # a stand-in for a CUDA tensor: its device and its plain copy
+        device = torch.device("cuda")
+        shape, dtype = values.shape, values.dtype
+
+        def cpu(self):
+            return values
+
+    def refuse(*args, **kwargs):
+        raise RuntimeError("CUDA error: out of memory (cudaHostAlloc)")
+
+    monkeypatch.setattr(torch, "empty", refuse)
+    np.testing.assert_array_equal(decoder._to_host(OnCuda()), values.numpy())
+    assert (decoder._to_host(values) == values.numpy()).all()  # a CPU tensor: .cpu()
