@@ -60,8 +60,12 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     if not decode:
         return
     header = encoder.header((u, v), (h, w), config.fps)
-    # the networks are not warmed here (they load their weights when a decoder needs them)
-    decoded = Decoder(header, depth="hint" if header.has_hint else "flat", hance="off").decode_packet(packet)
+    # the networks are not warmed here (they load their weights when a decoder needs them);
+    # on the stream's device, so that a CUDA stream starts its context and its warp kernels
+    # (Triton) here, not in the first timed frame (a frame of another size may still need
+    # its own compile: Triton specialises on sizes)
+    decoded = Decoder(header, depth="hint" if header.has_hint else "flat", hance="off",
+                      device=config.device).decode_packet(packet)
     from lfstream.metrics import mpsnr, mssim
     from lfstream.refocus import focal_stack
 

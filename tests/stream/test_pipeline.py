@@ -380,6 +380,32 @@ def test_warm_up_loads_every_kernel_the_stream_calls(monkeypatch, read_only):
     assert not missed, f"kernels called with types the warm-up did not load: {missed}"
 
 
+def test_the_warm_up_decodes_on_the_streams_device(monkeypatch):
+    """A CUDA stream's warm-up decodes on the GPU (its context and warp kernels start there,
+    outside the timed run): the warm-up's decoder gets the stream's device."""
+    import lfstream.codec.decoder as decoder_module
+    from lfstream.stream.warmup import warm_kernels
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    class Recorder:
+        def __init__(self, header, **kwargs):
+            seen.update(kwargs)
+
+        def decode_packet(self, packet):
+            raise Stop
+
+    config = StreamConfig(refocus="sas", save=())
+    config.device = "cuda:7"  # after the config's own check: only where it goes is looked at
+    monkeypatch.setattr(decoder_module, "Decoder", Recorder)
+    with pytest.raises(Stop):
+        warm_kernels(config)
+    assert seen["device"] == "cuda:7" and seen["hance"] == "off"
+
+
 @pytest.mark.parametrize("stored", ["transposed", "rows flipped", "quarter turn"])
 def test_the_refocus_stage_focuses_a_grid_stored_off_the_convention_as_its_own_order(stored):
     """A capture whose view grid is flipped or swapped (the hint carries its axes): the
