@@ -2,7 +2,8 @@
 # Every GPU check and benchmark in one call, for a short lease on a CUDA machine: the CUDA
 # tests (batched warp and sweep against the CPU kernels, float16 autocast), the decoder's
 # warp batched on the GPU (LF/s, 30 and 120 light fields a call), its kernels' launch settings
-# (bench/warp_launch.py: reports, changes nothing), the hint's sweep on the GPU, and the networks on the GPU (bench/networks.py --device cuda).
+# (bench/warp_launch.py: reports, changes nothing), the hint's sweep on the GPU, and the
+# networks on the GPU (bench/networks.py --device cuda).
 #
 #     bash bench/gpu.sh [OUTDIR]        (default bench/results/gpu; PYTHON picks the interpreter)
 set -u
