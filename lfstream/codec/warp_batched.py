@@ -274,10 +274,11 @@ def warp_views_batched(
         gains = gains.reshape(b, u * v, *gains.shape[3:])
     # (B, U*V, H) bool, the rows each view splats, and (B, U*V) bool, the views that splat any
     # (on the host: which passes need the splat, read once, not one device sync a pass)
-    splat_host = splat_rows = None
+    splat_host = splat_rows = splat_views = None
     if occlusion and view_disparities is None:
         splat_rows = _splat_rows(d, grid_offsets, _warp.SPLAT_TOLERANCE_PX)
-        splat_host = splat_rows.any(dim=-1).cpu().numpy()
+        splat_views = splat_rows.any(dim=-1)
+        splat_host = splat_views.cpu().numpy()
     out = torch.empty((b, u * v, h, w, c), dtype=torch.uint8, device=dev)
     step = max(1, chunk_pixels // max(1, b * h * w))
     fused = _fused_warp(dev)
@@ -297,21 +298,21 @@ def warp_views_batched(
         n = k1 - k0
         du = offsets[k0:k1, 0].view(1, n, 1, 1)
         dv = offsets[k0:k1, 1].view(1, n, 1, 1)
+        read_rows = None  # the fused warp: the rows of `maps` it reads (the centre map elsewhere)
         if view_disparities is not None:
             maps = view_disparities[:, k0:k1]
         elif splat_host is not None and splat_host[:, k0:k1].any():
-            if fused is not None:  # the splatted rows only; the warp samples the others with d
-                fused.warp_pixels(centres, fused.splat_maps(d, offsets, splat_rows, k0, n), out, offsets, k0, gains,
-                                  has_gains, None if gains is None else (rows, row_w),
-                                  None if gains is None else (cols, col_w), centre_maps=d, splat_rows=splat_rows)
-                continue
-            maps = _fill_holes(_splat(d, du, dv), d)
-            maps = torch.where(splat_rows[:, k0:k1, :, None], maps, d)  # rows not splatted: the centre map
+            if fused is not None:  # the splatted rows only
+                maps, read_rows = fused.splat_maps(d, offsets, splat_rows, splat_views, k0, n), splat_rows
+            else:
+                maps = _fill_holes(_splat(d, du, dv), d)
+                maps = torch.where(splat_rows[:, k0:k1, :, None], maps, d)  # rows not splatted: the centre map
         else:
             maps = d.expand(b, n, h, w)
         if fused is not None:
             fused.warp_pixels(centres, maps, out, offsets, k0, gains, has_gains,
-                              None if gains is None else (rows, row_w), None if gains is None else (cols, col_w))
+                              None if gains is None else (rows, row_w), None if gains is None else (cols, col_w),
+                              centre_maps=None if read_rows is None else d, splat_rows=read_rows)
             continue
         if src is None:  # the padded centre views, one int32 plane per channel, flat: a tap is one index
             padded = torch.nn.functional.pad(centres.permute(0, 3, 1, 2).float(), (1, 1, 1, 1), mode="replicate")

@@ -192,7 +192,8 @@ def _fill_kernel(d_ptr, maps_ptr, splat_ptr, H, W, VIEW0, NV, N, BLOCK_W: tl.con
     tl.store(row + pos, tl.where(hole, fill, val), mask=inside)
 
 
-def splat_maps(d: torch.Tensor, offsets: torch.Tensor, splat_rows: torch.Tensor, view0: int, n: int) -> torch.Tensor:
+def splat_maps(d: torch.Tensor, offsets: torch.Tensor, splat_rows: torch.Tensor, splat_views: torch.Tensor,
+               view0: int, n: int) -> torch.Tensor:
     """Views ``view0 ... view0 + n - 1``'s disparity maps in the rows ``splat_rows`` names: the
     centre maps ``d`` forward-splatted (z-tested) and hole-filled
     (:func:`lfstream.codec.warp_batched._splat` and ``_fill_holes``, in three kernels); the
@@ -201,7 +202,8 @@ def splat_maps(d: torch.Tensor, offsets: torch.Tensor, splat_rows: torch.Tensor,
     Args:
         d: ``(B, 1, H, W)`` float32 centre maps.
         offsets: ``(U*V, 2)`` float32 displacement per unit disparity.
-        splat_rows: ``(B, U*V, H)`` bool, the rows each view of each frame splats.
+        splat_rows: ``(B, U*V, H)`` bool, the rows each view of each frame splats, and
+            ``splat_views`` ``(B, U*V)`` bool, the views that splat any (``splat_rows.any(-1)``).
 
     Shape:
         - output: ``(B, n, H, W)`` float32
@@ -209,7 +211,7 @@ def splat_maps(d: torch.Tensor, offsets: torch.Tensor, splat_rows: torch.Tensor,
     b, _, h, w = d.shape
     maps = torch.empty((b, n, h, w), dtype=torch.float32, device=d.device)
     rows = splat_rows.contiguous().view(torch.int8)
-    flags = splat_rows.any(dim=-1).to(torch.int8)
+    flags = splat_views.to(torch.int8)
     nv = rows.shape[1]
     d = d.contiguous()
     du = offsets[:, 0].contiguous()
