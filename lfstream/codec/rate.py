@@ -43,7 +43,7 @@ from lfstream.codec.bitstream import Packet, StreamHeader, pack_header, pack_pac
 from lfstream.codec.hint import HintOptions, key_payload
 from lfstream.codec.intra import AV1_MIN_VIEW, CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
-from lfstream.codec.residual import VIEW_MODES
+from lfstream.codec.residual import VIEW_MODES, coded_size
 from lfstream.codec.shading import measure_gains
 from lfstream.errors import LFValueError
 from lfstream.lightfield import centre_view, to_uint8
@@ -679,6 +679,8 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
         # the views themselves (scenes warping cannot predict: toys_array); not where views
         # are missing: a prediction reconstructs those, a coded sequence would not
         for mode in VIEW_MODES:
+            if not av1_fits(coded_size(tuple(frames.shape[3:5]), mode)):
+                continue  # half-size views of small views: below what AV1 codes
             found = _views_candidate(frames, present, res_preset, fps, target_bytes, views_hint, mode)
             if found is not None:
                 q, at_q, moved = found

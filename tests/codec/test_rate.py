@@ -417,3 +417,18 @@ def test_the_quick_search_stops_at_the_first_probe_near_the_target():
         assert len(set(quick)) < len(set(full)) and 1 not in quick
     never = []
     assert _fitting_quality(sized(never), 500.0, near=0.05) is None and 1 in never  # even quality 1 passes it
+
+
+@pytest.mark.parametrize("views", [(1, 5), (3, 3)])
+def test_rate_control_skips_half_size_views_that_av1_cannot_code(views):
+    """Views of 32 x 48 pixels are AV1's to code, their half-size twins (16 x 24) are not:
+    the full search leaves that mode out instead of failing (it raised "preset 'best' with
+    a half-views residual" though the caller named no preset)."""
+    clip = synth_clip(1, 5 if views == (1, 5) else 3, (32, 48), seed=1).lf
+    lf = clip[0, 2:3] if views == (1, 5) else clip[0]
+    choice = choose_configuration(lf[None], 0.5, 30.0)
+    modes = {c["residual_mode"] for c in choice.candidates}
+    assert "views" in modes and "half-views" not in modes
+    data = lfstream.encode(lf, bpp=0.5)
+    assert lfstream.decode(data)[0].shape == lf.shape
+    assert abs(bpp(len(data), lf.shape) - 0.5) / 0.5 <= RATE_TOLERANCE
