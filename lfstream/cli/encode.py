@@ -4,14 +4,20 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import time
+from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from lfstream.cli._common import add_read_options, emit, float_in, int_in, load_from_args
 from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS
 from lfstream.codec.hint import HintOptions
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.residual import RESIDUAL_MODES
+
+if TYPE_CHECKING:
+    import numpy as np
 
 HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre view + depth hint)"
 
@@ -51,7 +57,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.codec.encoder import Encoder, encode_file, frames_of, write_stream_file
+    from lfstream.codec.encoder import Encoder, encode_file, write_stream_file
     from lfstream.codec.rate import choose_default, uses_default_choice
     from lfstream.errors import LFValueError
     from lfstream.io._fs import check_new_file
@@ -60,9 +66,9 @@ def run(args: argparse.Namespace) -> int:
 
     check_new_file(args.output, args.overwrite)
     check_device(args.device)  # a bad device fails before any reading or encoding
-    loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
-    frames = frames_of(loaded.lf)
-    fps = args.fps or loaded.fps or 30.0
+    source = _read_input(args)
+    frames, present, views, size = source.frames, source.present, source.first.shape[:2], source.first.shape[2:4]
+    fps = args.fps or source.fps or 30.0
     quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
     residual, residual_mode = args.residual, args.residual_mode
     prediction_db = None  # the default's check of its own prediction (rate.choose_default)
@@ -76,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
 
         # rate control encodes every frame while it searches: its stream is written as it is
         t0 = time.perf_counter()
-        rate = choose_configuration(frames, args.bpp, fps, loaded.present, preset=args.preset)
+        rate = choose_configuration(source.whole, args.bpp, fps, present, preset=args.preset)
         quality, depth_hint, preset, residual = rate.quality, rate.depth_hint, rate.preset, rate.residual
         residual_mode = rate.residual_mode
         hint_scale = rate.header.meta.get("hint", {}).get("hint_scale", hint_scale)
@@ -86,26 +92,26 @@ def run(args: argparse.Namespace) -> int:
         # the default: the centre's coding by the number of views, or the views themselves
         # where the prediction misses them
         t0 = time.perf_counter()
-        choice = choose_default(frames[0], quality, loaded.present, device=args.device)
+        choice = choose_default(source.first, quality, present, device=args.device)
         first_s = time.perf_counter() - t0
         enc = choice.encoder
         preset, depth_hint, residual, residual_mode = enc.preset, enc.depth_hint, enc.residual, enc.residual_mode
-        stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), enc, fps=fps,
-                            present=loaded.present, first=choice.first)
+        stats = encode_file(frames, args.output, views, size, enc, fps=fps, present=present, first=choice.first)
         stats.encode_s += first_s  # frame 0's fast encode and the check
         prediction_db = choice.prediction_db
         hint_scale = enc.hint_options.hint_scale
     else:
-        stats = encode_file(frames, args.output, tuple(frames.shape[1:3]), tuple(frames.shape[3:5]),
+        stats = encode_file(frames, args.output, views, size,
                             Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
                                     residual_mode=residual_mode, device=args.device), fps=fps,
-                            present=loaded.present)
+                            present=present)
+    shape = (stats.frames, *source.first.shape)  # a video read frame by frame: as many as were encoded
     result = dataclasses.asdict(stats)
-    result.update({"output": str(args.output), "bpp": bpp(stats.bytes, frames.shape),
-                   "hint_bpp": bpp(stats.hint_bytes, frames.shape), "quality": quality, "depth_hint": depth_hint,
+    result.update({"output": str(args.output), "bpp": bpp(stats.bytes, shape),
+                   "hint_bpp": bpp(stats.hint_bytes, shape), "quality": quality, "depth_hint": depth_hint,
                    "hint_scale": hint_scale if depth_hint else None,
                    "preset": preset, "residual": residual, "residual_mode": residual_mode if residual is not None else None,
-                   "residual_bpp": bpp(stats.residual_bytes, frames.shape)})
+                   "residual_bpp": bpp(stats.residual_bytes, shape)})
     if prediction_db is not None:
         result["prediction_db"] = prediction_db
     if rate is not None:
@@ -115,3 +121,39 @@ def run(args: argparse.Namespace) -> int:
          + (f", residual q{residual} {residual_mode} ({r['residual_bpp']:.5f} bpp)" if residual is not None else "")
          + f", encoded in {r['encode_s']:.3f} s")
     return 0
+
+
+
+@dataclasses.dataclass
+class _Input:
+    """What ``lfstream encode`` reads: frame 0 (the default's check codes it first), every
+    frame in order (frame 0 included) and, where the input was read whole, the video array
+    (rate control needs it)."""
+
+    first: np.ndarray
+    frames: Iterable[np.ndarray]
+    whole: np.ndarray | None
+    present: np.ndarray | None
+    fps: float | None
+
+
+def _read_input(args: argparse.Namespace) -> _Input:
+    """The input of ``lfstream encode``. A mosaic video is read frame by frame
+    (:func:`lfstream.io.open_video_lf`: one 30 MB frame of 7x7x375x540 in memory, not the
+    whole video) except for rate control (``--bpp``), which encodes every frame while it
+    searches."""
+    from lfstream.cli._common import read_options
+    from lfstream.codec.encoder import frames_of
+    from lfstream.errors import LFFormatError
+    from lfstream.io import VIDEO_EXTS, open_video_lf
+
+    if args.bpp is None and args.input.is_file() and args.input.suffix.lower() in VIDEO_EXTS:
+        video = open_video_lf(args.input, read_options(args))
+        first = next(video.frames, None)
+        if first is None:
+            raise LFFormatError(f"{args.input}: contains no frames")
+        frames_of(first)  # checked as a light field read whole is
+        return _Input(first, itertools.chain([first], video.frames), None, None, video.fps)
+    loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
+    whole = frames_of(loaded.lf)
+    return _Input(whole[0], whole, whole, loaded.present, loaded.fps)

@@ -1,7 +1,8 @@
 """Light-field I/O: readers for every common layout, writers that never leave a torn file.
 
 - :mod:`~lfstream.io.readers`: :func:`load_lf` / :func:`read_lf` with :class:`ReadOptions`
-  (format detection, missing views, crops, flips).
+  (format detection, missing views, crops, flips); :func:`open_video_lf` reads a mosaic
+  video frame by frame.
 - :mod:`~lfstream.io.images`, :mod:`~lfstream.io.video`, :mod:`~lfstream.io.pfm`: single
   images and lenslet images, mosaic videos (PyAV), disparity maps.
 - :mod:`~lfstream.io.writers`: :func:`write_lf`.
@@ -10,7 +11,7 @@
 
 from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image, write_image
 from lfstream.io.pfm import read_pfm, write_pfm
-from lfstream.io.readers import LoadedLF, ReadOptions, load_lf, read_lf
+from lfstream.io.readers import LoadedLF, ReadOptions, VideoLF, load_lf, open_video_lf, read_lf
 from lfstream.io.video import (
     GRID_METADATA_KEY,
     GRID_METADATA_PREFIX,
@@ -31,9 +32,11 @@ __all__ = [
     "GRID_METADATA_PREFIX",
     "ReadOptions",
     "LoadedLF",
+    "VideoLF",
     "VideoWriter",
     "load_lf",
     "read_lf",
+    "open_video_lf",
     "write_lf",
     "read_image",
     "write_image",

@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,7 +32,7 @@ import numpy as np
 
 from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError, LFValueError
 from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image
-from lfstream.io.video import VIDEO_EXTS, iter_video_frames, read_mosaic_video, video_grid_and_fps
+from lfstream.io.video import VIDEO_EXTS, collect_frames, iter_video_frames, video_grid_and_fps, video_info
 from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_lf, from_mosaic
 
 _RE_RC = re.compile(r"^(\d+)_(\d+)$")
@@ -274,6 +274,58 @@ def _read_layered(path: Path, max_frames: int | None) -> LoadedLF:
     return LoadedLF(lf=lf, format=path.suffix.lower().lstrip("."), path=path, fps=fps)
 
 
+@dataclass
+class VideoLF:
+    """A mosaic video's light fields, decoded one at a time (:func:`open_video_lf`).
+
+    Attributes:
+        frames: ``(U, V, H, W, 3)`` uint8 frames, C-contiguous, with the options' crop and
+            flips applied; one frame in memory at a time.
+        fps: the container's frame rate, or ``None``.
+        count: how many frames it yields where the container says how many it holds (at
+            most ``max_frames``), else ``None``.
+        path: the file.
+    """
+
+    frames: Iterator[np.ndarray]
+    fps: float | None
+    count: int | None
+    path: Path
+
+
+def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None) -> VideoLF:
+    """A mosaic video (grid from ``options.grid`` or the file's metadata) as light fields
+    read lazily, with the crop and flips of ``options`` applied to each frame: what
+    :func:`load_lf` reads of it, without holding the video in memory.
+
+    Raises:
+        LFFileError: the file does not exist.
+        LFFormatError: not a readable video, or no grid known.
+    """
+    opts = options or ReadOptions()
+    path = Path(path)
+    if not path.is_file():
+        raise LFFileError(f"{path}: no such file")
+    stored, fps, count = video_info(path)
+    grid = opts.grid or stored
+    if grid is None:
+        raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
+    if count and opts.max_frames:
+        count = min(count, opts.max_frames)
+    flips = tuple(a for a, f in ((0, opts.flip_u), (1, opts.flip_v)) if f)
+
+    def frames() -> Iterator[np.ndarray]:
+        from lfstream.lightfield import crop_views
+
+        for img in iter_video_frames(path, opts.max_frames):
+            lf = from_mosaic(img, grid)
+            if opts.crop is not None:
+                lf = crop_views(lf, opts.crop)
+            yield np.ascontiguousarray(np.flip(lf, axis=flips) if flips else lf)
+
+    return VideoLF(frames(), fps, count, path)
+
+
 def load_lf(path: str | os.PathLike, options: ReadOptions | None = None, **kwargs) -> LoadedLF:
     """Reads a light field (any supported format) together with its metadata.
 
@@ -302,8 +354,11 @@ def load_lf(path: str | os.PathLike, options: ReadOptions | None = None, **kwarg
         elif ext in _LAYERED_READERS:
             loaded = _read_layered(path, opts.max_frames)
         elif ext in VIDEO_EXTS:
-            lf, fps = read_mosaic_video(path, opts.grid, opts.max_frames)
-            loaded = LoadedLF(lf=lf, format="video", path=path, fps=fps)
+            # crop and flips frame by frame as it is read (one copy of each frame)
+            video = open_video_lf(path, opts)
+            loaded = LoadedLF(lf=collect_frames(video.frames, video.count, path), format="video", path=path,
+                              fps=video.fps)
+            return loaded
         elif ext in IMAGE_EXTS:
             if opts.angular is not None:
                 lf, weight = read_eslf(path, opts.angular, crop)
@@ -437,4 +492,4 @@ def read_lf(
     return loaded.lf, present
 
 
-__all__ = ["ReadOptions", "LoadedLF", "load_lf", "read_lf"]
+__all__ = ["ReadOptions", "LoadedLF", "VideoLF", "load_lf", "read_lf", "open_video_lf"]

@@ -10,9 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from lfstream.errors import LFValueError
-from lfstream.io.readers import ReadOptions, load_lf
-from lfstream.io.video import VIDEO_EXTS, iter_video_frames, video_grid_and_fps
-from lfstream.lightfield import from_mosaic
+from lfstream.io.readers import ReadOptions, load_lf, open_video_lf
+from lfstream.io.video import VIDEO_EXTS
 
 #: Bump when the renderer's output changes, so stale cached clips are not reused.
 BUILTIN_CLIP_VERSION = 1
@@ -120,12 +119,10 @@ def file_source(path: str | os.PathLike, options: ReadOptions | None = None) -> 
     sends the centre view (which must exist) and the metrics count the present views only."""
     opts = options or ReadOptions()
     path = Path(path)
-    if path.is_file() and path.suffix.lower() in VIDEO_EXTS and not opts.crop:
-        grid, fps = video_grid_and_fps(path)
-        grid = opts.grid or grid
-        if grid is not None:
-            frames = (from_mosaic(f, grid) for f in iter_video_frames(path, opts.max_frames))
-            return Source(frames, fps, None, opts.max_frames)
+    if path.is_file() and path.suffix.lower() in VIDEO_EXTS:
+        # frame by frame, crop and flips applied (the flips were once skipped here)
+        video = open_video_lf(path, opts)
+        return Source(video.frames, video.fps, None, video.count or opts.max_frames)
     loaded = load_lf(path, opts)
     present = loaded.present
     if present is not None and present.all():

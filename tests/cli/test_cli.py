@@ -427,3 +427,29 @@ def test_the_stream_summary_text_says_what_was_coded():
     assert "coding: fast q50 + hint\n" in _text(summary, None) + "\n"
     summary["coding"]["hint_scale"] = 8  # the hint's resolution, where the summary has it
     assert "coding: fast q50 + hint 1/8\n" in _text(summary, None) + "\n"
+
+
+def test_encode_reads_a_video_frame_by_frame_into_the_streams_bytes(capsys, tmp_path, monkeypatch):
+    """``lfstream encode`` of a mosaic video holds one frame at a time (its frames come from
+    open_video_lf's iterator, not an array of the video) and writes what lfstream.encode
+    makes of the video read whole; --flip-u and --views apply to each frame."""
+    import lfstream
+    import lfstream.io as lio
+    from lfstream.io import ReadOptions, load_lf
+
+    clip = synth_clip(3, 5, (48, 64), seed=4).lf
+    lfstream.write_lf(tmp_path / "clip.mp4", clip, fps=24)
+    opened = []
+    real = lio.open_video_lf
+
+    def spy(path, options=None):
+        opened.append(real(path, options))
+        return opened[-1]
+
+    monkeypatch.setattr(lio, "open_video_lf", spy)
+    code, out, _ = run(capsys, "encode", tmp_path / "clip.mp4", "-o", tmp_path / "a.lfs", "--flip-u", "--views", "3",
+                       "--json")
+    assert code == 0 and len(opened) == 1 and json.loads(out)["frames"] == 3
+    assert next(opened[0].frames, None) is None  # consumed as an iterator
+    whole = load_lf(tmp_path / "clip.mp4", ReadOptions(flip_u=True, crop=3)).lf
+    assert (tmp_path / "a.lfs").read_bytes() == lfstream.encode(whole, fps=24)

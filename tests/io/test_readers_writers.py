@@ -161,3 +161,38 @@ def test_bad_inputs_name_the_file(tmp_path, rng):
         assert path.name in str(info.value), what
     with pytest.raises(LFStreamError, match="bad.pfm"):
         read_pfm(tmp_path / "bad.pfm")
+
+
+@pytest.mark.parametrize("crop, flip_u, flip_v", [(None, False, False), (None, True, False), (3, True, True)])
+def test_a_mosaic_video_read_frame_by_frame_is_what_load_lf_reads(tmp_path, rng, crop, flip_u, flip_v):
+    """open_video_lf applies the crop and flips to each frame as it reads; load_lf reads a
+    video through it, and both equal the whole video cropped and flipped afterwards."""
+    from lfstream.io import ReadOptions, open_video_lf
+    from lfstream.lightfield import crop_views
+
+    video = random_lf(rng, (4, 5, 5, 8, 10, 3))
+    write_lf(tmp_path / "clip.mp4", video, fps=12)
+    opts = ReadOptions(crop=crop, flip_u=flip_u, flip_v=flip_v, max_frames=3)
+    want = crop_views(video[:3], crop) if crop else video[:3]
+    want = want[:, ::-1] if flip_u else want
+    want = want[:, :, ::-1] if flip_v else want
+    lazy = open_video_lf(tmp_path / "clip.mp4", opts)
+    assert lazy.count == 3 and lazy.fps == pytest.approx(12)
+    frames = list(lazy.frames)
+    assert all(f.flags.c_contiguous for f in frames)
+    np.testing.assert_array_equal(np.stack(frames), want)
+    loaded = load_lf(tmp_path / "clip.mp4", opts)
+    assert loaded.lf.flags.c_contiguous
+    np.testing.assert_array_equal(loaded.lf, want)
+
+
+def test_collecting_frames_survives_a_wrong_frame_count(tmp_path):
+    """A container's frame count sizes the array up front; fewer or more frames than it
+    says still give exactly the frames read."""
+    from lfstream.io.video import collect_frames
+
+    frames = [np.full((2, 3), k, np.uint8) for k in range(4)]
+    for count in (None, 1, 2, 4, 9):
+        np.testing.assert_array_equal(collect_frames(iter(frames), count, tmp_path), np.stack(frames))
+    with pytest.raises(LFFormatError, match="no frames"):
+        collect_frames(iter([]), 3, tmp_path)
