@@ -32,36 +32,63 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from lfstream.codec.bitstream import read_header
     from lfstream.codec.decoder import iter_decode, stack_frames
     from lfstream.errors import BitstreamError, LFFileError
-    from lfstream.io import write_lf, write_pfm
+    from lfstream.io import VIDEO_EXTS, VideoWriter, grid_metadata, write_lf, write_pfm
     from lfstream.io._fs import check_new_file
+    from lfstream.lightfield import to_mosaic
 
     check_new_file(args.output, args.overwrite)
     if args.disparity_out is not None:
         args.disparity_out.mkdir(parents=True, exist_ok=True)
-    frames, error = [], None
+    # a video is written frame by frame as the frames are decoded (one frame in memory, the
+    # stream's frame rate); the other outputs take the frames together at the end
+    to_video = args.output.suffix.lower() in VIDEO_EXTS
+    frames, count, writer, error, write_s = [], 0, None, None, 0.0
     t0 = time.perf_counter()
     try:
         with open(args.input, "rb") as fh:
+            fps = read_header(fh).fps
+            fh.seek(0)
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
                                  device=args.device, batch=args.batch, deblock=not args.no_deblock):
-                frames.append(f.lf)
+                if to_video:
+                    t_write = time.perf_counter()
+                    if writer is None:
+                        writer = VideoWriter(args.output, fps, lossless=True, metadata=grid_metadata(f.lf.shape[:2]))
+                    writer.write(to_mosaic(f.lf))
+                    write_s += time.perf_counter() - t_write
+                else:
+                    frames.append(f.lf)
+                count += 1
                 if args.disparity_out is not None:
                     write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
     except OSError as exc:
+        if writer is not None:
+            writer.abort()
         raise LFFileError(f"{args.input}: cannot read ({exc.strerror or exc})") from exc
     except BitstreamError as exc:
         error = exc
-    decode_s = time.perf_counter() - t0
-    if frames:
-        # a damaged stream still gives a valid output of every frame before the damage
+    except KeyboardInterrupt:  # the frames decoded so far, as a complete video
+        if writer is not None:
+            writer.close()
+        raise
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
+    decode_s = time.perf_counter() - t0 - write_s  # the decoding alone, as for the other outputs
+    # a damaged stream still gives a valid output of every frame before the damage
+    if writer is not None:
+        writer.close()
+    elif frames:
         write_lf(args.output, stack_frames(frames), overwrite=args.overwrite)
     if error is not None:
-        done = (f"{len(frames)} complete frame(s) before it written to {args.output}" if frames
+        done = (f"{count} complete frame(s) before it written to {args.output}" if count
                 else "no complete frame, nothing written")
         raise BitstreamError(f"{args.input}: {error} ({done})")
-    result = {"frames": len(frames), "decode_s": decode_s, "output": str(args.output)}
-    emit(args, result, f"{len(frames)} frame(s) decoded in {decode_s:.3f} s -> {args.output}")
+    result = {"frames": count, "decode_s": decode_s, "output": str(args.output)}
+    emit(args, result, f"{count} frame(s) decoded in {decode_s:.3f} s -> {args.output}")
     return 0

@@ -103,6 +103,31 @@ def test_api_errors():
         lfstream.decode(data, depth="magic")
 
 
+def test_cli_decodes_to_a_video_frame_by_frame_at_the_streams_rate(tmp_path, capsys):
+    """``decode -o clip.mp4`` writes each frame as it is decoded (the frames equal the
+    ``.npy`` output's), at the stream's frame rate (the video was 30 fps whatever the
+    stream said); a truncated stream leaves a complete, playable video of the frames
+    before the damage."""
+    from lfstream.io import load_lf
+
+    src = tmp_path / "clip.npz"
+    lfstream.write_lf(src, synth_clip(3, 5, (32, 40), seed=1).lf)
+    assert main(["encode", str(src), "-o", str(tmp_path / "a.lfs"), "--fps", "24"]) == 0
+    assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "a.npy")]) == 0
+    capsys.readouterr()
+    assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "a.mp4"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["frames"] == 3
+    video = load_lf(tmp_path / "a.mp4")
+    assert video.fps == pytest.approx(24)
+    np.testing.assert_array_equal(video.lf, np.load(tmp_path / "a.npy"))
+    data = (tmp_path / "a.lfs").read_bytes()
+    (tmp_path / "cut.lfs").write_bytes(data[: len(data) - 100])
+    assert main(["decode", str(tmp_path / "cut.lfs"), "-o", str(tmp_path / "cut.mp4")]) == 2
+    assert "frame 2" in capsys.readouterr().err
+    np.testing.assert_array_equal(load_lf(tmp_path / "cut.mp4").lf, video.lf[:2])
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary file left
+
+
 def test_cli_encode_decode_and_damaged_stream(tmp_path, capsys):
     src = tmp_path / "clip.npz"
     lfstream.write_lf(src, synth_clip(3, 5, (32, 40), seed=1).lf)
