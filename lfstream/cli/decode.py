@@ -35,16 +35,15 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.codec.bitstream import read_header
     from lfstream.codec.decoder import iter_decode, stack_frames
     from lfstream.errors import BitstreamError, LFFileError
-    from lfstream.io import VIDEO_EXTS, VideoWriter, grid_metadata, write_lf, write_pfm
+    from lfstream.io import FrameWriter, write_lf, write_pfm
     from lfstream.io._fs import check_new_file
-    from lfstream.lightfield import to_mosaic
 
     check_new_file(args.output, args.overwrite)
     if args.disparity_out is not None:
         args.disparity_out.mkdir(parents=True, exist_ok=True)
-    # a video is written frame by frame as the frames are decoded (one frame in memory, the
-    # stream's frame rate); the other outputs take the frames together at the end
-    to_video = args.output.suffix.lower() in VIDEO_EXTS
+    # a video or a folder is written frame by frame as the frames are decoded (one frame in
+    # memory; a video at the stream's frame rate); .npy and .npz take them together at the end
+    by_frame = args.output.suffix.lower() not in (".npy", ".npz")
     frames, count, writer, error, write_s = [], 0, None, None, 0.0
     t0 = time.perf_counter()
     try:
@@ -54,11 +53,11 @@ def run(args: argparse.Namespace) -> int:
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
                                  device=args.device, batch=args.batch, deblock=not args.no_deblock):
-                if to_video:
+                if by_frame:
                     t_write = time.perf_counter()
                     if writer is None:
-                        writer = VideoWriter(args.output, fps, lossless=True, metadata=grid_metadata(f.lf.shape[:2]))
-                    writer.write(to_mosaic(f.lf))
+                        writer = FrameWriter(args.output, fps=fps, overwrite=args.overwrite)
+                    writer.write(f.lf)
                     write_s += time.perf_counter() - t_write
                 else:
                     frames.append(f.lf)
@@ -71,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         raise LFFileError(f"{args.input}: cannot read ({exc.strerror or exc})") from exc
     except BitstreamError as exc:
         error = exc
-    except KeyboardInterrupt:  # the frames decoded so far, as a complete video
+    except KeyboardInterrupt:  # the frames decoded so far, finalised
         if writer is not None:
             writer.close()
         raise

@@ -32,26 +32,46 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.io import write_lf
-    from lfstream.synth import SynthConfig, render_clip
+    import numpy as np
+
+    from lfstream.io import FrameWriter, write_lf
+    from lfstream.io._fs import atomic_path
+    from lfstream.synth import SynthConfig, iter_clip, render_clip
 
     cfg = SynthConfig(frames=args.frames, views=args.views, size=tuple(args.size), seed=args.seed, layers=args.layers,
                       disparity_range=tuple(args.disparity_range), motion=args.motion, camera_pan=args.camera_pan,
                       noise=args.noise, vignetting=args.vignetting, exposure_drift=args.exposure_drift)
-    t0 = time.perf_counter()
-    clip = render_clip(cfg)
-    render_s = time.perf_counter() - t0
+    cfg.validate()
     out = args.output
     written = [str(out)]
-    if out.suffix.lower() == ".npz":
+    render_s, lo, hi = 0.0, np.inf, -np.inf
+    if out.suffix.lower() == ".npz":  # compressed whole: the clip is rendered in memory
+        t0 = time.perf_counter()
+        clip = render_clip(cfg)
+        render_s = time.perf_counter() - t0
         write_lf(out, clip.lf, disparity=clip.disparity, overwrite=args.overwrite)
+        lo, hi = float(clip.disparity.min()), float(clip.disparity.max())
     else:
+        # frame by frame: a video, a .npy or a folder as each frame is rendered, and the
+        # disparity into a memory-mapped .npy, so a long clip never sits in memory
         disp_path = check_new_file(out.with_name(out.stem + "_disparity.npy"), args.overwrite)
-        write_lf(out, clip.lf, fps=args.fps, overwrite=args.overwrite)
-        write_lf(disp_path, clip.disparity[..., None], overwrite=True)
+        n, (h, w) = cfg.views, cfg.size
+        with FrameWriter(out, cfg.frames, fps=args.fps, overwrite=args.overwrite) as writer, \
+                atomic_path(disp_path) as disp_tmp:
+            disparity = np.lib.format.open_memmap(disp_tmp, mode="w+", dtype=np.float32,
+                                                  shape=(cfg.frames, n, n, h, w, 1))
+            t0 = time.perf_counter()
+            for t, (lf, disp) in enumerate(iter_clip(cfg)):
+                render_s += time.perf_counter() - t0
+                writer.write(lf)
+                disparity[t, ..., 0] = disp
+                lo, hi = min(lo, float(disp.min())), max(hi, float(disp.max()))
+                t0 = time.perf_counter()
+            disparity.flush()
+            del disparity
         written.append(str(disp_path))
     info = {"output": written, "frames": cfg.frames, "views": [cfg.views, cfg.views], "size": list(cfg.size),
-            "disparity_range": [float(clip.disparity.min()), float(clip.disparity.max())], "render_s": render_s}
+            "disparity_range": [lo, hi], "render_s": render_s}
     emit(args, info, lambda r: f"{cfg.frames} frames of {cfg.views}x{cfg.views} views, {cfg.size[0]}x{cfg.size[1]}, "
          f"disparity {r['disparity_range'][0]:.2f}..{r['disparity_range'][1]:.2f} -> {', '.join(written)}")
     return 0

@@ -5,7 +5,8 @@
   video frame by frame.
 - :mod:`~lfstream.io.images`, :mod:`~lfstream.io.video`, :mod:`~lfstream.io.pfm`: single
   images and lenslet images, mosaic videos (PyAV), disparity maps.
-- :mod:`~lfstream.io.writers`: :func:`write_lf`.
+- :mod:`~lfstream.io.writers`: :func:`write_lf`; :class:`FrameWriter` writes a video frame by
+  frame.
 - :mod:`~lfstream.io._fs`: atomic writes and fresh output folders, shared by every writer.
 """
 
@@ -23,7 +24,7 @@ from lfstream.io.video import (
     video_grid_and_fps,
     write_video,
 )
-from lfstream.io.writers import write_lf
+from lfstream.io.writers import FrameWriter, write_lf
 
 __all__ = [
     "IMAGE_EXTS",
@@ -38,6 +39,7 @@ __all__ = [
     "read_lf",
     "open_video_lf",
     "write_lf",
+    "FrameWriter",
     "read_image",
     "write_image",
     "read_eslf",

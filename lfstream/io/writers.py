@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.errors import LFValueError
-from lfstream.io._fs import atomic_write_bytes, check_new_file
+from lfstream.errors import LFFileError, LFValueError
+from lfstream.io._fs import atomic_write_bytes, check_new_file, temp_sibling
 from lfstream.io.images import IMAGE_EXTS, write_image
-from lfstream.io.video import VIDEO_EXTS, grid_metadata, write_video
+from lfstream.io.video import VIDEO_EXTS, VideoWriter, grid_metadata, write_video
 from lfstream.lightfield import check_lf, to_mosaic
 
 
@@ -69,6 +69,104 @@ def write_lf(
     return path
 
 
+class FrameWriter:
+    """Writes an LF video frame by frame to what :func:`write_lf` writes whole, holding one
+    frame at a time: a mosaic video (the file appears when closed), a ``.npy`` of ``count``
+    frames (memory-mapped, renamed into place when all are written) or a folder of
+    ``frame_NNNNNN/`` view folders. ``.npz`` is not written this way (its members are
+    compressed whole). A context manager: the output is finalised when the block ends
+    normally, or on Ctrl-C with the frames so far where the format allows (a video, a
+    folder), and discarded on any other exception.
+
+    Args:
+        path: the output; an existing file or non-empty folder is an error unless
+            ``overwrite``.
+        count: frames to come (required for ``.npy``; the file holds exactly that many).
+        fps, lossless, image_ext: as :func:`write_lf`.
+    """
+
+    def __init__(self, path: str | os.PathLike, count: int | None = None, *, fps: float = 30.0, lossless: bool = True,
+                 overwrite: bool = False, image_ext: str = ".png") -> None:
+        self.path = Path(path)
+        self._ext = self.path.suffix.lower()
+        if self._ext == ".npz" or self._ext in IMAGE_EXTS or self._ext in (".pfm", ".lfs"):
+            raise LFValueError(f"{self.path}: cannot write a light field frame by frame as {self._ext}; use .npy, "
+                               "a video or a folder")
+        if self._ext == ".npy" and not (isinstance(count, (int, np.integer)) and count >= 1):
+            raise LFValueError(f"{self.path}: a .npy written frame by frame needs the frame count, got {count!r}")
+        if self.path.exists() and (self.path.is_file() or any(self.path.iterdir())):
+            check_new_file(self.path, overwrite)
+        self._count, self._fps, self._lossless, self._image_ext = count, fps, lossless, image_ext
+        self._video = self._store = self._tmp = None
+        self._made_folder = False
+        self.frames = 0
+
+    def write(self, lf: np.ndarray) -> None:
+        """Appends one frame ``(U, V, H, W, 3)`` uint8."""
+        lf = np.asarray(lf)
+        check_lf(lf, allow_video=False)
+        if lf.dtype != np.uint8:
+            raise LFValueError(f"{self.path}: frames must be uint8, got {lf.dtype}")
+        if self._ext in VIDEO_EXTS:
+            if self._video is None:
+                self._video = VideoWriter(self.path, self._fps, self._lossless, metadata=grid_metadata(lf.shape[:2]))
+            self._video.write(to_mosaic(lf))
+        elif self._ext == ".npy":
+            if self._store is None:
+                self._tmp = temp_sibling(self.path)
+                try:
+                    self._store = np.lib.format.open_memmap(self._tmp, mode="w+", dtype=np.uint8,
+                                                            shape=(self._count, *lf.shape))
+                except OSError as exc:
+                    raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+            if self.frames >= self._count or lf.shape != self._store.shape[1:]:
+                raise LFValueError(f"{self.path}: frame {self.frames} of shape {lf.shape} does not fit "
+                                   f"{self._store.shape}")
+            self._store[self.frames] = lf
+        else:
+            if not self.path.exists():
+                self.path.mkdir(parents=True)
+                self._made_folder = True
+            _write_views(self.path / f"frame_{self.frames:06d}", lf, self._image_ext)
+        self.frames += 1
+
+    def close(self) -> None:
+        """Finalises the output (a ``.npy`` must have received its ``count`` frames)."""
+        if self._video is not None:
+            self._video.close()
+        if self._store is not None:
+            store, self._store = self._store, None
+            store.flush()
+            del store
+            if self.frames != self._count:
+                self._tmp.unlink(missing_ok=True)
+                raise LFValueError(f"{self.path}: {self.frames} of {self._count} frames written; nothing kept")
+            try:
+                os.replace(self._tmp, self.path)
+            except OSError as exc:
+                raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+
+    def abort(self) -> None:
+        """Discards what was written (a folder keeps its complete frames; one this writer
+        made and wrote nothing to is removed)."""
+        if self._video is not None:
+            self._video.abort()
+        if self._store is not None:
+            self._store = None
+            self._tmp.unlink(missing_ok=True)
+        if self._made_folder and self.path.is_dir() and not any(self.path.iterdir()):
+            self.path.rmdir()
+
+    def __enter__(self) -> FrameWriter:
+        return self
+
+    def __exit__(self, exc_type, *exc) -> None:
+        if exc_type is None or (exc_type is KeyboardInterrupt and self._ext != ".npy"):
+            self.close()
+        else:
+            self.abort()
+
+
 def _write_views(folder: Path, lf: np.ndarray, image_ext: str) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     for u in range(lf.shape[0]):
@@ -82,4 +180,4 @@ def _npy_bytes(arr: np.ndarray) -> bytes:
     return bio.getvalue()
 
 
-__all__ = ["write_lf"]
+__all__ = ["write_lf", "FrameWriter"]

@@ -453,3 +453,22 @@ def test_encode_reads_a_video_frame_by_frame_into_the_streams_bytes(capsys, tmp_
     assert next(opened[0].frames, None) is None  # consumed as an iterator
     whole = load_lf(tmp_path / "clip.mp4", ReadOptions(flip_u=True, crop=3)).lf
     assert (tmp_path / "a.lfs").read_bytes() == lfstream.encode(whole, fps=24)
+
+
+@pytest.mark.parametrize("name", ["clip.mp4", "clip.npy", "clipdir"])
+def test_synth_writes_frame_by_frame_what_it_renders(capsys, tmp_path, name):
+    """``lfstream synth`` writes a video, a .npy or a folder as each frame is rendered, the
+    disparity into a .npy beside it: the same frames and disparity as render_clip."""
+    from lfstream import read_lf
+    from lfstream.synth import SynthConfig, render_clip
+
+    code, out, _ = run(capsys, "synth", tmp_path / name, "--frames", 3, "--views", 3, "--size", "24x32", "--seed", 5,
+                       "--json")
+    assert code == 0
+    clip = render_clip(SynthConfig(frames=3, views=3, size=(24, 32), seed=5))
+    info = json.loads(out)
+    assert info["disparity_range"] == pytest.approx([float(clip.disparity.min()), float(clip.disparity.max())])
+    np.testing.assert_array_equal(read_lf(tmp_path / name), clip.lf)
+    stem = name.split(".")[0]
+    np.testing.assert_array_equal(np.load(tmp_path / f"{stem}_disparity.npy"), clip.disparity[..., None])
+    assert not [p for p in tmp_path.rglob(".*")]
