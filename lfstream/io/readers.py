@@ -306,8 +306,8 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None) -
     path = Path(path)
     if not path.is_file():
         raise LFFileError(f"{path}: no such file")
-    stored, fps, count = video_info(path)
-    grid = opts.grid or stored
+    info = video_info(path)
+    grid, fps, count = opts.grid or info.grid, info.fps, info.count
     if grid is None:
         raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
     if count and opts.max_frames:

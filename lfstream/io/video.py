@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
@@ -78,24 +79,47 @@ def _tags(container) -> dict[str, str]:
     return tags
 
 
-def video_info(path: Path) -> tuple[tuple[int, int] | None, float | None, int | None]:
-    """A mosaic video's view grid (from its metadata), frame rate and frame count (``None``
-    where the file does not say: Matroska, for one, keeps no count)."""
+@dataclass(frozen=True)
+class VideoInfo:
+    """What a video's container says, read without decoding a frame.
+
+    Attributes:
+        grid: the mosaic's view grid ``(U, V)`` from the metadata, or ``None``.
+        fps: frame rate, or ``None``.
+        count: frames, from the container's count or (``count_frames``) its packets;
+            ``None`` where neither was asked for nor recorded.
+        size: ``(H, W)`` of a frame as the readers return it (a padded frame's true size).
+    """
+
+    grid: tuple[int, int] | None
+    fps: float | None
+    count: int | None
+    size: tuple[int, int]
+
+
+def video_info(path: Path, count_frames: bool = False) -> VideoInfo:
+    """A video's :class:`VideoInfo`; ``count_frames``: count the packets where the container
+    keeps no frame count (Matroska), reading the file but decoding nothing."""
     with _open_container(path) as container:
+        if not container.streams.video:
+            raise LFFormatError(f"{path}: has no video stream")
         tags = _tags(container)
-        grid = _parse_pair(GRID_METADATA_PREFIX, tags.get(GRID_METADATA_KEY))
-        fps = count = None
-        if container.streams.video:
-            stream = container.streams.video[0]
-            fps = float(stream.average_rate) if stream.average_rate else None
-            count = int(stream.frames) or None
-    return grid, fps, count
+        stream = container.streams.video[0]
+        fps = float(stream.average_rate) if stream.average_rate else None
+        count = int(stream.frames) or None
+        if count is None and count_frames:
+            try:
+                count = sum(1 for packet in container.demux(stream) if packet.size)
+            except Exception as exc:  # noqa: BLE001 - PyAV's errors: a damaged file
+                raise LFFormatError(f"{path}: not a readable video ({exc})") from exc
+        size = _parse_pair(SIZE_METADATA_PREFIX, tags.get(GRID_METADATA_KEY)) or (stream.height, stream.width)
+        return VideoInfo(_parse_pair(GRID_METADATA_PREFIX, tags.get(GRID_METADATA_KEY)), fps, count, size)
 
 
 def video_grid_and_fps(path: Path) -> tuple[tuple[int, int] | None, float | None]:
     """Reads the view grid stored in a mosaic video's metadata and its frame rate."""
-    grid, fps, _ = video_info(path)
-    return grid, fps
+    info = video_info(path)
+    return info.grid, info.fps
 
 
 def collect_frames(frames: Iterator[np.ndarray], count: int | None, source: Path) -> np.ndarray:
@@ -128,12 +152,12 @@ def read_mosaic_video(
     path: Path, grid: tuple[int, int] | None = None, max_frames: int | None = None
 ) -> tuple[np.ndarray, float | None]:
     """Reads a video whose frames are SAI mosaics; returns ``((T, U, V, H, W, 3), fps)``."""
-    stored, fps, count = video_info(path)
-    grid = grid or stored
+    info = video_info(path)
+    grid = grid or info.grid
     if grid is None:
         raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
-    count = min(count, max_frames) if count and max_frames else count
-    return collect_frames((from_mosaic(f, grid) for f in iter_video_frames(path, max_frames)), count, path), fps
+    count = min(info.count, max_frames) if info.count and max_frames else info.count
+    return collect_frames((from_mosaic(f, grid) for f in iter_video_frames(path, max_frames)), count, path), info.fps
 
 
 class VideoWriter:
@@ -327,6 +351,5 @@ def grid_metadata(views: tuple[int, int]) -> dict[str, str]:
 
 
 __all__ = ["VIDEO_EXTS", "GRID_METADATA_KEY", "GRID_METADATA_PREFIX", "SIZE_METADATA_PREFIX", "LOSSLESS_X264",
-           "VideoWriter",
-           "rgb_to_video_i420", "write_video", "iter_video_frames", "video_info", "video_grid_and_fps", "collect_frames",
-           "read_mosaic_video", "grid_metadata"]
+           "VideoWriter", "rgb_to_video_i420", "write_video", "iter_video_frames", "VideoInfo", "video_info",
+           "video_grid_and_fps", "collect_frames", "read_mosaic_video", "grid_metadata"]

@@ -472,3 +472,32 @@ def test_synth_writes_frame_by_frame_what_it_renders(capsys, tmp_path, name):
     stem = name.split(".")[0]
     np.testing.assert_array_equal(np.load(tmp_path / f"{stem}_disparity.npy"), clip.disparity[..., None])
     assert not [p for p in tmp_path.rglob(".*")]
+
+
+@pytest.mark.parametrize("extra", [[], ["--views", "3"], ["--max-frames", "2"]])
+def test_info_describes_videos_and_streams_without_decoding_them(capsys, tmp_path, monkeypatch, extra):
+    """``info`` of a mosaic video or an .lfs stream reads the container or header and counts
+    the frames; nothing is decoded, and the answer is what describing the loaded light
+    field gives."""
+    import lfstream
+    import lfstream.codec.decoder as decoder
+    import lfstream.io.readers as readers
+    import lfstream.io.video as video
+    from lfstream.cli.info import describe
+    from lfstream.io import ReadOptions, load_lf
+
+    clip = synth_clip(3, 5, (32, 40), seed=2).lf
+    lfstream.write_lf(tmp_path / "clip.mp4", clip, fps=24)
+    (tmp_path / "clip.lfs").write_bytes(lfstream.encode(clip, fps=24))
+    opts = ReadOptions(crop=3 if "--views" in extra else None, max_frames=2 if "--max-frames" in extra else None)
+    want = {name: describe(load_lf(tmp_path / name, opts)) for name in ("clip.mp4", "clip.lfs")}
+
+    def refuse(*a, **k):
+        raise AssertionError("decoded")
+
+    for module in (video, readers):
+        monkeypatch.setattr(module, "iter_video_frames", refuse)
+    monkeypatch.setattr(decoder, "iter_decode", refuse)
+    for name in ("clip.mp4", "clip.lfs"):
+        code, out, _ = run(capsys, "info", tmp_path / name, "--json", *extra)
+        assert code == 0 and json.loads(out) == json.loads(json.dumps(want[name]))
