@@ -29,10 +29,12 @@ SIZE_METADATA_PREFIX = "lfstream-size="
 #: x264's settings for a lossless ``.mp4``/``.mov`` (RGB, QP 0). ``fastdecode`` codes with
 #: CAVLC instead of CABAC: a lossless mosaic is mostly residual bits, and CABAC's serial
 #: arithmetic decoding of them made reading the file the slowest stage of streaming it.
-#: Measured on the 2-core EPYC, 8 mosaics of 7x7x375x540 (2625 x 3780, the synthetic clip),
+#: Measured on the 2-core EPYC, mosaics of 7x7x375x540 (2625 x 3780, synthetic clips),
 #: against the previous ``veryfast`` with CABAC: reading 438 -> 149 ms of CPU a frame
-#: (245 -> 78 ms wall on two threads), writing 323 -> 137 ms a frame, 7.49 -> 7.69 MB a frame
-#: (+2.7 %); ``faster`` rather than ``veryfast``, which with CAVLC wrote 8.39 MB a frame.
+#: (245 -> 78 ms wall on two threads), writing 323 -> 137 ms, 7.49 -> 7.69 MB a frame
+#: (+2.7 %) without sensor noise; with it (bench/video_io.py) 728 -> 267 ms, 355 -> 194 ms,
+#: +15.5 % (CAVLC codes noise less tightly; slower presets won back 1-3 % of it at 2-3x the
+#: writing time). ``faster`` rather than ``veryfast``: 8 % fewer bytes on the noise-free clip.
 #: Files written before stay valid H.264 (they read at the old speed).
 LOSSLESS_X264 = {"qp": "0", "preset": "faster", "tune": "fastdecode"}
 
