@@ -217,7 +217,12 @@ class VideoWriter:
             # (readers crop it back, see iter_video_frames)
             pix_fmt = "yuv420p"
             codec, options = "libx264", {"crf": str(self._crf), "preset": self._preset}
-            params = (["rc-lookahead=1", "bframes=1"] if self._low_delay else []) + (
+            # B-frames behind x264's full lookahead made its output depend on the contents of
+            # uninitialised memory (the same frames gave different files in different runs;
+            # MALLOC_PERTURB_ shows it): no B-frames there, +5-20 % bytes on focal-plane
+            # videos at -0.0..-0.4 dB. The low-delay settings (one B-frame, a one-frame
+            # lookahead) give the same bytes every run as they are.
+            params = (["rc-lookahead=1", "bframes=1"] if self._low_delay else ["bframes=0"]) + (
                 ["me=dia", "subme=1"] if self._fast_search else [])
             if params:
                 options["x264-params"] = ":".join(params)
@@ -229,7 +234,9 @@ class VideoWriter:
             note = f"{SIZE_METADATA_PREFIX}{h}x{w}"
             metadata[GRID_METADATA_KEY] = f"{metadata[GRID_METADATA_KEY]} {note}" if GRID_METADATA_KEY in metadata else note
         try:
-            self._container = av.open(str(self._tmp), mode="w")
+            # bit-exact muxing: Matroska otherwise writes random segment and track UIDs, and
+            # the same frames would not give the same file twice
+            self._container = av.open(str(self._tmp), mode="w", container_options={"fflags": "+bitexact"})
             for k, v in metadata.items():
                 self._container.metadata[k] = v
             self._stream = self._container.add_stream(codec, rate=Fraction(self._fps).limit_denominator(1001),

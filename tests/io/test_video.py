@@ -113,3 +113,37 @@ def test_lossless_mp4_is_exact_and_coded_for_quick_reading(tmp_path, rng):
     with VideoWriter(tmp_path / "cabac.mp4", lossless=False, crf=17, preset="veryfast") as w:  # the check can fail
         w.write(frames[0])
     assert _entropy_coding_flags(tmp_path / "cabac.mp4") == [1]
+
+
+_WRITE_SCRIPT = """
+import sys
+import numpy as np
+from lfstream.io import VideoWriter
+from lfstream.synth import synth_clip
+# moving layers with sensor noise: content on which the lossy writer's bytes used to vary
+frames = [np.ascontiguousarray(f[1, 1]) for f in synth_clip(12, 3, (150, 200), seed=4, noise=2.0).lf]
+for name, lossless in (("lossy.mp4", False), ("lossless.mp4", True), ("ffv1.mkv", True)):
+    with VideoWriter(sys.argv[1] + "/" + name, lossless=lossless) as w:
+        for f in frames:
+            w.write(f)
+"""
+
+
+def test_the_same_frames_give_the_same_file_whatever_the_heap_holds(tmp_path):
+    """Two processes write the same frames with the allocator filling memory with different
+    bytes (MALLOC_PERTURB_): every file is the same byte for byte. Before: x264's B-frames
+    behind its full lookahead read uninitialised memory (lossy .mp4), and Matroska wrote
+    random UIDs (.mkv)."""
+    import os
+    import subprocess
+    import sys
+
+    outs = []
+    for perturb in ("165", "33"):
+        out = tmp_path / perturb
+        out.mkdir()
+        env = {**os.environ, "MALLOC_PERTURB_": perturb}
+        subprocess.run([sys.executable, "-c", _WRITE_SCRIPT, str(out)], check=True, env=env, timeout=120)
+        outs.append(out)
+    for name in ("lossy.mp4", "lossless.mp4", "ffv1.mkv"):
+        assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
