@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import itertools
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from lfstream.io import write_image, write_video
+    from lfstream.io import VideoWriter, write_image, write_video
     from lfstream.io._fs import atomic_write_text
     from lfstream.refocus import focal_stack, plane_records, resolve_slopes, slope_range
 
@@ -56,64 +59,116 @@ def run(args: argparse.Namespace) -> int:
         slopes = resolve_slopes(args.alphas, args.slopes)
     if args.output.exists() and (not args.output.is_dir() or any(args.output.iterdir())):
         raise LFFileError(f"{args.output}: already exists and is not an empty folder")
-    loaded = load_from_args(args)
-    axes = _view_axes(loaded) if args.axes == "auto" else None
-    lf, present = canonical_views(loaded.lf, axes, loaded.present)
-    t0 = time.perf_counter()
+    source = _read_input(args)
+    axes = _view_axes(source.first, source.present) if args.axes == "auto" else None
     extra = {"device": args.device} if args.method == "refnet" else {}
-    stack = focal_stack(np.ascontiguousarray(lf), slopes=slopes, method=args.method, aperture=args.aperture,
-                        aperture_shape=args.aperture_shape, present=present, **extra)
-    render_s = time.perf_counter() - t0
-    if stack.dtype != np.uint8:
-        stack = np.clip(stack * 255.0 + 0.5, 0, 255).astype(np.uint8)
     out = prepare_output_dir(args.output)
-    video = stack if stack.ndim == 5 else stack[None]
+    single = source.count == 1
     files: list[str] = []
     planes = plane_records(slopes)
-    for t, frame_stack in enumerate(video):
-        folder = out if len(video) == 1 else out / f"frame_{t:06d}"
-        folder.mkdir(exist_ok=True)
-        for k, img in enumerate(frame_stack):
-            name = folder / f"plane_{k:02d}.png"
-            write_image(name, img)
-            files.append(str(name))
-    if not args.no_sweep:
-        if len(video) == 1:
-            for ext in (".mp4", ".gif"):
-                write_video(out / f"sweep{ext}", list(video[0]), fps=args.fps, lossless=False)
-                files.append(str(out / f"sweep{ext}"))
-        else:
-            for k in range(video.shape[1]):
-                path = out / f"plane_{k:02d}.mp4"
-                write_video(path, list(video[:, k]), fps=loaded.fps or 30.0, lossless=False)
-                files.append(str(path))
+    records: list[dict] = []
+    plane_videos: list = []  # one focal-plane video each, frame after frame (a video input)
+    render_s, frames = 0.0, 0
+    # frame by frame: a video's frames are read, refocused and written one at a time (the
+    # video and its focal stacks were held whole: 1.2 GB for 20 frames of 7x7x375x540)
+    try:
+        for t, frame in enumerate(source.frames):
+            lf, present = canonical_views(frame, axes, source.present)
+            t0 = time.perf_counter()
+            stack = focal_stack(np.ascontiguousarray(lf), slopes=slopes, method=args.method, aperture=args.aperture,
+                                aperture_shape=args.aperture_shape, present=present, **extra)
+            render_s += time.perf_counter() - t0
+            if stack.dtype != np.uint8:
+                stack = np.clip(stack * 255.0 + 0.5, 0, 255).astype(np.uint8)
+            folder = out if single else out / f"frame_{t:06d}"
+            folder.mkdir(exist_ok=True)
+            for k, img in enumerate(stack):
+                name = folder / f"plane_{k:02d}.png"
+                write_image(name, img)
+                files.append(str(name))
+            if not args.no_sweep and single:
+                for ext in (".mp4", ".gif"):
+                    write_video(out / f"sweep{ext}", list(stack), fps=args.fps, lossless=False)
+                    files.append(str(out / f"sweep{ext}"))
+            elif not args.no_sweep:
+                if not plane_videos:
+                    plane_videos = [VideoWriter(out / f"plane_{k:02d}.mp4", source.fps or 30.0, lossless=False)
+                                    for k in range(len(stack))]
+                for writer, img in zip(plane_videos, stack):
+                    writer.write(img)
+            if not args.no_viewer:
+                # click to focus needs the scene's disparity: the codec's hint estimator, per frame
+                from lfstream.codec.hint import estimate_disparity
+                from lfstream.viewer import disparity_record
+
+                records.append(disparity_record(t, estimate_disparity(frame, present=source.present)))
+            frames += 1
+    except KeyboardInterrupt:  # the planes' videos of the frames so far, finalised
+        for writer in plane_videos:
+            writer.close()
+        raise
+    except BaseException:
+        for writer in plane_videos:
+            writer.abort()
+        raise
+    for writer in plane_videos:
+        writer.close()
+        files.append(str(writer.path))
     atomic_write_text(out / "planes.json", json.dumps({"planes": planes, "updates": []}, indent=1))
     viewer = None
     if not args.no_viewer:
-        # click to focus needs the scene's disparity: the codec's hint estimator, per frame
-        from lfstream.codec.hint import estimate_disparity
-        from lfstream.viewer import disparity_record, write_disparity_json, write_viewer
+        from lfstream.viewer import write_disparity_json, write_viewer
 
-        lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
-        write_disparity_json(out, [disparity_record(t, estimate_disparity(f, present=loaded.present))
-                                   for t, f in enumerate(lf)])
-        viewer = write_viewer(out, fps=args.fps if len(video) == 1 else (loaded.fps or 30.0))
-    summary = {"input": str(args.input), "method": args.method, "frames": len(video), "planes": planes,
+        write_disparity_json(out, records)
+        viewer = write_viewer(out, fps=args.fps if single else (source.fps or 30.0))
+    summary = {"input": str(args.input), "method": args.method, "frames": frames, "planes": planes,
                "view_axes": axes_as_list(axes),
                "render_s": render_s, "output": str(out), "files": len(files),
                "viewer": str(viewer) if viewer is not None else None}
     reordered = "" if axes is None else f" (views reordered to the convention: view axes {axes_as_list(axes, 2)})"
-    emit(args, summary, f"{len(slopes)} planes x {len(video)} frame(s) by {args.method} in {render_s:.3f} s{reordered}"
+    emit(args, summary, f"{len(slopes)} planes x {frames} frame(s) by {args.method} in {render_s:.3f} s{reordered}"
          f" -> {out}"
          + (f"\nopen {viewer.resolve().as_uri()} to click-to-focus" if viewer is not None else ""))
     return 0
 
 
-def _view_axes(loaded) -> np.ndarray | None:
+@dataclasses.dataclass
+class _Input:
+    """What ``lfstream refocus`` reads: frame 0 (the view axes are detected on it), every
+    frame in order, how many there are, the present-view mask and the frame rate."""
+
+    first: np.ndarray
+    frames: Iterable[np.ndarray]
+    count: int
+    present: np.ndarray | None
+    fps: float | None
+
+
+def _read_input(args: argparse.Namespace) -> _Input:
+    """The input of ``lfstream refocus``: a mosaic video frame by frame
+    (:func:`lfstream.io.open_video_lf`), anything else read whole."""
+    from lfstream.cli._common import read_options
+    from lfstream.errors import LFFormatError
+    from lfstream.io import VIDEO_EXTS, open_video_lf
+    from lfstream.io.video import video_info
+
+    if args.input.is_file() and args.input.suffix.lower() in VIDEO_EXTS:
+        video = open_video_lf(args.input, read_options(args))
+        count = video.count or video_info(args.input, count_frames=True).count
+        first = next(video.frames, None)
+        if first is None or not count:
+            raise LFFormatError(f"{args.input}: contains no frames")
+        count = min(count, args.max_frames or count)
+        return _Input(first, itertools.chain([first], video.frames), count, None, video.fps)
+    loaded = load_from_args(args)
+    lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
+    return _Input(lf[0], lf, len(lf), loaded.present, loaded.fps)
+
+
+def _view_axes(first: np.ndarray, present: np.ndarray | None) -> np.ndarray | None:
     """The view axes of the input's first frame (:func:`lfstream.codec.hint.estimate_view_axes`),
     ``None`` where they are the convention."""
     from lfstream.codec.hint import estimate_view_axes, is_standard
 
-    first = loaded.lf if loaded.lf.ndim == 5 else loaded.lf[0]
-    axes = estimate_view_axes(first, present=loaded.present)
+    axes = estimate_view_axes(first, present=present)
     return None if is_standard(axes) else axes
