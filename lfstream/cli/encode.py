@@ -138,16 +138,16 @@ class _Input:
 
 
 def _read_input(args: argparse.Namespace) -> _Input:
-    """The input of ``lfstream encode``. A mosaic video is read frame by frame
-    (:func:`lfstream.io.open_video_lf`: one 30 MB frame of 7x7x375x540 in memory, not the
-    whole video) except for rate control (``--bpp``), which encodes every frame while it
-    searches."""
+    """The input of ``lfstream encode``. An LF video (a mosaic video, an ``.lfs``) is read
+    frame by frame (:func:`lfstream.io.open_video_lf`: one 30 MB frame of 7x7x375x540 in
+    memory, not the whole video) except for rate control (``--bpp``), which encodes every
+    frame while it searches."""
     from lfstream.cli._common import read_options
     from lfstream.codec.encoder import frames_of
     from lfstream.errors import LFFormatError
-    from lfstream.io import VIDEO_EXTS, open_video_lf
+    from lfstream.io import open_video_lf, reads_lazily
 
-    if args.bpp is None and args.input.is_file() and args.input.suffix.lower() in VIDEO_EXTS:
+    if args.bpp is None and reads_lazily(args.input):
         video = open_video_lf(args.input, read_options(args))
         first = next(video.frames, None)
         if first is None:

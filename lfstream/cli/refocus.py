@@ -145,14 +145,14 @@ class _Input:
 
 
 def _read_input(args: argparse.Namespace) -> _Input:
-    """The input of ``lfstream refocus``: a mosaic video frame by frame
-    (:func:`lfstream.io.open_video_lf`), anything else read whole."""
+    """The input of ``lfstream refocus``: an LF video (a mosaic video, an ``.lfs``) frame by
+    frame (:func:`lfstream.io.open_video_lf`), anything else read whole."""
     from lfstream.cli._common import read_options
     from lfstream.errors import LFFormatError
-    from lfstream.io import VIDEO_EXTS, open_video_lf
+    from lfstream.io import open_video_lf, reads_lazily
     from lfstream.io.video import video_info
 
-    if args.input.is_file() and args.input.suffix.lower() in VIDEO_EXTS:
+    if reads_lazily(args.input):
         video = open_video_lf(args.input, read_options(args))
         count = video.count or video_info(args.input, count_frames=True).count
         first = next(video.frames, None)

@@ -469,11 +469,43 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
     return stack_frames(frames), header.fps
 
 
-def read_lfs(path: str | os.PathLike, max_frames: int | None = None) -> tuple[np.ndarray, float]:
-    """An ``.lfs`` file as a light field for the readers (:func:`lfstream.io.load_lf`):
-    decoded with flat disparity (every view is the decoded centre view)."""
-    return decode_file(path, depth="flat", max_frames=max_frames)
+def lfs_frames(path: str | os.PathLike, max_frames: int | None = None) -> tuple[Iterator[np.ndarray], float, int]:
+    """An ``.lfs`` file as a light field for the readers (:func:`lfstream.io.open_video_lf`,
+    :func:`lfstream.io.load_lf`): its frames decoded one at a time as :func:`decode` decodes
+    them (the hint where the stream has one), its frame rate, and its frame count (at most
+    ``max_frames``; the packets are counted, checksums and all, before any is decoded). It
+    was decoded whole with flat disparity, for ``info``, which reads headers now: every
+    other command given an ``.lfs`` (``refocus``, ``stream``, ``view``) then saw the centre
+    view copied to every view, a light field without parallax.
+
+    Raises:
+        LFFileError: the file cannot be read.
+        BitstreamError: damage, named with the file (the frames before it are yielded first).
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            header = read_header(fh)
+            count = sum(1 for _ in iter_packets(fh, header))
+    except OSError as exc:
+        raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    except BitstreamError as exc:
+        raise BitstreamError(f"{path}: {exc}") from exc
+    if count == 0:
+        raise BitstreamError(f"{path}: stream holds no frames")
+
+    def frames() -> Iterator[np.ndarray]:
+        try:
+            with open(path, "rb") as fh:
+                for f in iter_decode(fh, max_frames=max_frames):
+                    yield f.lf
+        except OSError as exc:
+            raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+        except BitstreamError as exc:
+            raise BitstreamError(f"{path}: {exc}") from exc
+
+    return frames(), header.fps, min(count, max_frames or count)
 
 
 __all__ = ["DEPTH_MODES", "HANCE_MODES", "HANCE_MAX_QUALITY", "BATCH_RANGE", "BESIDE_MIN_BITS", "Decoder",
-           "DecodedFrame", "decode", "iter_decode", "decode_file", "read_lfs"]
+           "DecodedFrame", "decode", "iter_decode", "decode_file", "lfs_frames"]

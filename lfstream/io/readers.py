@@ -8,7 +8,7 @@ Formats are detected from the path:
 
 ========================  =====================================================================
 ``*.npy`` / ``*.npz``     one frame or a video (``.npz``: key ``lf``, optional ``disparity``)
-``*.lfs``                 an lfstream bitstream (decoded with flat disparity for ``info``)
+``*.lfs``                 an lfstream bitstream, decoded (:func:`lfstream.decode`'s defaults)
 folder of images          ``R_C.png`` (0-based), ``input_CamNNN.png`` (HCI, ``NNN = row*n + col``),
                           ``NAME_RR_CC.png`` (1-based, Lytro exports)
 single image              a lenslet/ESLF image (``angular=N``) or a mosaic (``grid=(U, V)``)
@@ -262,21 +262,23 @@ def _classify_folder(folder: Path) -> str:
 
 
 #: Formats whose decoder lives in a higher layer (the codec decodes ``.lfs``): imported by
-#: name only when such a file is read, so the I/O layer never imports the codec.
-_LAYERED_READERS = {".lfs": ("lfstream.codec.decoder", "read_lfs")}
+#: name when one is read (``lfstream.io`` does not import the codec); the function gives
+#: ``(frames iterator, fps, count)``.
+_LAYERED_READERS = {".lfs": ("lfstream.codec.decoder", "lfs_frames")}
+#: What :func:`open_video_lf` reads frame by frame.
+LAZY_EXTS = VIDEO_EXTS + tuple(_LAYERED_READERS)
 
 
-def _read_layered(path: Path, max_frames: int | None) -> LoadedLF:
-    import importlib
-
-    module, name = _LAYERED_READERS[path.suffix.lower()]
-    lf, fps = getattr(importlib.import_module(module), name)(path, max_frames=max_frames)
-    return LoadedLF(lf=lf, format=path.suffix.lower().lstrip("."), path=path, fps=fps)
+def reads_lazily(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is an LF video :func:`open_video_lf` reads one frame at a time (a
+    mosaic video or an ``.lfs`` stream)."""
+    path = Path(path)
+    return path.suffix.lower() in LAZY_EXTS and path.is_file()
 
 
 @dataclass
 class VideoLF:
-    """A mosaic video's light fields, decoded one at a time (:func:`open_video_lf`).
+    """An LF video's light fields, decoded one at a time (:func:`open_video_lf`).
 
     Attributes:
         frames: ``(U, V, H, W, 3)`` uint8 frames, C-contiguous, with the options' crop and
@@ -294,22 +296,31 @@ class VideoLF:
 
 
 def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None) -> VideoLF:
-    """A mosaic video (grid from ``options.grid`` or the file's metadata) as light fields
-    read lazily, with the crop and flips of ``options`` applied to each frame: what
-    :func:`load_lf` reads of it, without holding the video in memory.
+    """An LF video read lazily — a mosaic video (grid from ``options.grid`` or the file's
+    metadata) or an ``.lfs`` stream (decoded as :func:`lfstream.decode` decodes it) — with
+    the crop and flips of ``options`` applied to each frame: what :func:`load_lf` reads of
+    it, without holding the video in memory.
 
     Raises:
         LFFileError: the file does not exist.
         LFFormatError: not a readable video, or no grid known.
+        BitstreamError: a damaged ``.lfs`` (counted before the first frame is decoded).
     """
     opts = options or ReadOptions()
     path = Path(path)
     if not path.is_file():
         raise LFFileError(f"{path}: no such file")
-    info = video_info(path)
-    grid, fps, count = opts.grid or info.grid, info.fps, info.count
-    if grid is None:
-        raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
+    if path.suffix.lower() in _LAYERED_READERS:
+        import importlib
+
+        module, name = _LAYERED_READERS[path.suffix.lower()]
+        decoded, fps, count = getattr(importlib.import_module(module), name)(path, max_frames=opts.max_frames)
+    else:
+        info = video_info(path)
+        grid, fps, count = opts.grid or info.grid, info.fps, info.count
+        if grid is None:
+            raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
+        decoded = (from_mosaic(img, grid) for img in iter_video_frames(path, opts.max_frames))
     if count and opts.max_frames:
         count = min(count, opts.max_frames)
     flips = tuple(a for a, f in ((0, opts.flip_u), (1, opts.flip_v)) if f)
@@ -317,8 +328,7 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None) -
     def frames() -> Iterator[np.ndarray]:
         from lfstream.lightfield import crop_views
 
-        for img in iter_video_frames(path, opts.max_frames):
-            lf = from_mosaic(img, grid)
+        for lf in decoded:
             if opts.crop is not None:
                 lf = crop_views(lf, opts.crop)
             yield np.ascontiguousarray(np.flip(lf, axis=flips) if flips else lf)
@@ -351,14 +361,11 @@ def load_lf(path: str | os.PathLike, options: ReadOptions | None = None, **kwarg
             loaded = _read_array_file(path)
             if opts.max_frames is not None and loaded.lf.ndim == 6:
                 loaded.lf = loaded.lf[: opts.max_frames]
-        elif ext in _LAYERED_READERS:
-            loaded = _read_layered(path, opts.max_frames)
-        elif ext in VIDEO_EXTS:
+        elif ext in LAZY_EXTS:
             # crop and flips frame by frame as it is read (one copy of each frame)
             video = open_video_lf(path, opts)
-            loaded = LoadedLF(lf=collect_frames(video.frames, video.count, path), format="video", path=path,
-                              fps=video.fps)
-            return loaded
+            return LoadedLF(lf=collect_frames(video.frames, video.count, path),
+                            format="video" if ext in VIDEO_EXTS else ext.lstrip("."), path=path, fps=video.fps)
         elif ext in IMAGE_EXTS:
             if opts.angular is not None:
                 lf, weight = read_eslf(path, opts.angular, crop)
@@ -492,4 +499,4 @@ def read_lf(
     return loaded.lf, present
 
 
-__all__ = ["ReadOptions", "LoadedLF", "VideoLF", "load_lf", "read_lf", "open_video_lf"]
+__all__ = ["ReadOptions", "LoadedLF", "VideoLF", "LAZY_EXTS", "load_lf", "read_lf", "open_video_lf", "reads_lazily"]

@@ -10,8 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from lfstream.errors import LFValueError
-from lfstream.io.readers import ReadOptions, load_lf, open_video_lf
-from lfstream.io.video import VIDEO_EXTS
+from lfstream.io.readers import ReadOptions, load_lf, open_video_lf, reads_lazily
 
 #: Bump when the renderer's output changes, so stale cached clips are not reused.
 BUILTIN_CLIP_VERSION = 1
@@ -114,12 +113,12 @@ class Source:
 
 
 def file_source(path: str | os.PathLike, options: ReadOptions | None = None) -> Source:
-    """The frames of an LF file; mosaic videos are read lazily (one frame in memory at a
-    time). With ``options.allow_missing`` a folder with missing views streams: the encoder
+    """The frames of an LF file; mosaic videos and ``.lfs`` streams are read lazily (one
+    frame in memory at a time). With ``options.allow_missing`` a folder with missing views streams: the encoder
     sends the centre view (which must exist) and the metrics count the present views only."""
     opts = options or ReadOptions()
     path = Path(path)
-    if path.is_file() and path.suffix.lower() in VIDEO_EXTS:
+    if reads_lazily(path):
         # frame by frame, crop and flips applied (the flips were once skipped here)
         video = open_video_lf(path, opts)
         return Source(video.frames, video.fps, None, video.count or opts.max_frames)

@@ -324,3 +324,19 @@ def test_decode_of_one_frame_is_the_decoded_frame_without_a_copy():
     two = lfstream.decode(lfstream.encode(clip))
     assert two.shape == (2, *frame.shape)
     np.testing.assert_array_equal(two[0], frame)
+
+
+def test_an_lfs_file_reads_as_the_light_field_it_decodes_to(tmp_path):
+    """``load_lf`` of an ``.lfs`` (what ``refocus``, ``stream`` and ``view`` read) is the
+    stream decoded as ``lfstream.decode`` decodes it, parallax included: it was the centre
+    view copied to every view (flat disparity), so refocusing an encoded file only blurred
+    its centre view."""
+    from lfstream.io import load_lf
+
+    clip = synth_clip(2, 5, (32, 40), seed=1).lf
+    data = lfstream.encode(clip, fps=12)
+    (tmp_path / "a.lfs").write_bytes(data)
+    loaded = load_lf(tmp_path / "a.lfs")
+    assert loaded.format == "lfs" and loaded.fps == pytest.approx(12)
+    np.testing.assert_array_equal(loaded.lf, lfstream.decode(data))
+    assert not (loaded.lf[:, 0, 0] == loaded.lf[:, 2, 2]).all()
