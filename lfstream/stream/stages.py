@@ -28,7 +28,7 @@ from lfstream.stream.frames import SourceFrame, StackFrame
 from lfstream.stream.refocuser import Refocuser
 from lfstream.stream.report import QualityStats, RateStats, StageStats, StaticSkipStats
 from lfstream.stream.sinks import Sink
-from lfstream.stream.transport import Receiver, Sender, get_until_stopped, put_until_stopped
+from lfstream.stream.transport import Receiver, Sender, StoppedError, get_until_stopped, put_until_stopped
 
 _POLL_S = 0.1
 
@@ -51,7 +51,12 @@ class RunControl:
         self._lock = threading.Lock()
 
     def fail(self, stage: str, frame: int | None, exc: BaseException) -> None:
-        """Records the first failure (later ones are consequences) and stops every stage."""
+        """Records the first failure (later ones are consequences) and stops every stage. A
+        receiver whose wait ended because the run was stopped did not fail (a Ctrl-C
+        before the stream header arrived was reported as "stage transport failed", exit 2,
+        and no summary)."""
+        if isinstance(exc, StoppedError) and self.stop_event.is_set():
+            return
         with self._lock:
             if self.error is None:
                 where = f" at frame {frame}" if frame is not None else ""

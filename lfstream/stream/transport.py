@@ -47,6 +47,11 @@ class TransportError(LFStreamError, OSError):
     """A connection failed, timed out or spoke something other than lfstream's framing."""
 
 
+class StoppedError(TransportError):
+    """The run was stopped (Ctrl-C, or another stage's failure) while a receiver waited for
+    the stream: the end of the wait, not a failure of its own."""
+
+
 @dataclass
 class ReceiveStats:
     """What the receiver saw besides good packets."""
@@ -157,7 +162,7 @@ class InprocChannel:
     def header(self, stop: threading.Event | None = None) -> StreamHeader:
         while not self._header_ready.wait(_POLL_S):
             if stop is not None and stop.is_set():
-                raise TransportError("stopped before the stream header arrived")
+                raise StoppedError("stopped before the stream header arrived")
         assert self._header is not None
         return self._header
 
@@ -260,7 +265,7 @@ class FileChannel:
     def _open_reader(self, stop):
         while not self._started.wait(_POLL_S):
             if stop is not None and stop.is_set():
-                raise TransportError("stopped before the stream started")
+                raise StoppedError("stopped before the stream started")
         path = self._tmp if self._tmp.exists() else self.path
         return _FollowReader(path, self._done, stop)
 
@@ -359,7 +364,10 @@ class TcpReceiver:
                 conn.settimeout(self._timeout)
                 return conn
             except TimeoutError:
-                if (stop is not None and stop.is_set()) or time.monotonic() > deadline:
+                if stop is not None and stop.is_set():
+                    raise StoppedError(f"stopped before a sender connected to {self.address[0]}:"
+                                       f"{self.address[1]}") from None
+                if time.monotonic() > deadline:
                     raise TransportError(f"no sender connected to {self.address[0]}:{self.address[1]} "
                                          f"within {self._timeout:.0f} s") from None
 
@@ -452,5 +460,5 @@ class LazyTcpSender:
 
 
 __all__ = ["Sender", "Receiver", "in_order", "LazyTcpSender", "InprocChannel", "FileChannel", "TcpSender", "TcpReceiver",
-           "ReceiveStats", "SequenceFilter", "TransportError", "parse_address", "put_until_stopped", "get_until_stopped",
-           "TAG_HEADER", "TAG_PACKET", "TAG_END"]
+           "ReceiveStats", "SequenceFilter", "TransportError", "StoppedError", "parse_address", "put_until_stopped",
+           "get_until_stopped", "TAG_HEADER", "TAG_PACKET", "TAG_END"]

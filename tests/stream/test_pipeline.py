@@ -154,6 +154,33 @@ def test_stop_is_prompt_and_backpressure_bounds_the_producer(tmp_path):
     assert len(list(iter_video_frames(out / "plane_00.mp4"))) == sunk
 
 
+@pytest.mark.parametrize("transport", ["inproc", "file", "tcp"])
+def test_a_stop_before_the_first_frame_is_an_interruption_not_a_failure(tmp_path, transport):
+    """Ctrl-C while the first frame is still being read (a large video's first frame takes a
+    while): the decoder, waiting for the stream header, ends its wait; the run reports
+    ``interrupted`` (exit 130) with a summary, not "stage transport failed" (exit 2, no
+    summary), as it did."""
+    frame = next(iter(small_source(frames=1)))
+    release = threading.Event()
+
+    def slow_first_frame():
+        release.wait(10)  # the stop comes while the source still reads frame 0
+        yield frame
+
+    out = prepare_output_dir(tmp_path / transport)
+    pipe = Pipeline(slow_first_frame(), StreamConfig(refocus="sas", transport=transport, metrics=False), out,
+                    stream_file=out / "stream.lfs")
+
+    def stop_then_release():
+        pipe.stop()
+        time.sleep(0.3)
+        release.set()
+
+    threading.Timer(1.0, stop_then_release).start()
+    summary = pipe.run()
+    assert summary["interrupted"] and summary["frames"] == 0
+
+
 def test_serve_and_stream_cli_over_tcp(tmp_path, capsys):
     src = tmp_path / "in.npy"
     np.save(src, np.stack(list(small_source(frames=3))))
