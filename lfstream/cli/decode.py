@@ -41,14 +41,18 @@ def run(args: argparse.Namespace) -> int:
     check_new_file(args.output, args.overwrite)
     if args.disparity_out is not None:
         args.disparity_out.mkdir(parents=True, exist_ok=True)
-    # a video or a folder is written frame by frame as the frames are decoded (one frame in
-    # memory; a video at the stream's frame rate); .npy and .npz take them together at the end
-    by_frame = args.output.suffix.lower() not in (".npy", ".npz")
-    frames, count, writer, error, write_s = [], 0, None, None, 0.0
+    # a video, a folder or a .npy is written frame by frame as the frames are decoded (one
+    # frame in memory; a video at the stream's frame rate; a .npy sized by the packets
+    # counted first); a .npz takes them together at the end (its members are compressed whole)
+    by_frame = args.output.suffix.lower() != ".npz"
+    frames, count, writer, error, write_s, expected = [], 0, None, None, 0.0, None
     t0 = time.perf_counter()
     try:
         with open(args.input, "rb") as fh:
-            fps = read_header(fh).fps
+            header = read_header(fh)
+            fps = header.fps
+            if args.output.suffix.lower() == ".npy":
+                expected = _complete_packets(fh, header)
             fh.seek(0)
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
@@ -56,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
                 if by_frame:
                     t_write = time.perf_counter()
                     if writer is None:
-                        writer = FrameWriter(args.output, fps=fps, overwrite=args.overwrite)
+                        writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite)
                     writer.write(f.lf)
                     write_s += time.perf_counter() - t_write
                 else:
@@ -72,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         error = exc
     except KeyboardInterrupt:  # the frames decoded so far, finalised
         if writer is not None:
-            writer.close()
+            writer.close(partial=True)
         raise
     except BaseException:
         if writer is not None:
@@ -81,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     decode_s = time.perf_counter() - t0 - write_s  # the decoding alone, as for the other outputs
     # a damaged stream still gives a valid output of every frame before the damage
     if writer is not None:
-        writer.close()
+        writer.close(partial=error is not None)
     elif frames:
         write_lf(args.output, stack_frames(frames), overwrite=args.overwrite)
     if error is not None:
@@ -91,3 +95,18 @@ def run(args: argparse.Namespace) -> int:
     result = {"frames": count, "decode_s": decode_s, "output": str(args.output)}
     emit(args, result, f"{count} frame(s) decoded in {decode_s:.3f} s -> {args.output}")
     return 0
+
+
+def _complete_packets(fh, header) -> int:
+    """How many packets of the stream after its header are complete (read, checksums and
+    all, up to the first damaged one): the frames a decode will give."""
+    from lfstream.codec.bitstream import iter_packets
+    from lfstream.errors import BitstreamError
+
+    count = 0
+    try:
+        for _ in iter_packets(fh, header):
+            count += 1
+    except BitstreamError:
+        pass
+    return count

@@ -130,20 +130,25 @@ class FrameWriter:
             _write_views(self.path / f"frame_{self.frames:06d}", lf, self._image_ext)
         self.frames += 1
 
-    def close(self) -> None:
-        """Finalises the output (a ``.npy`` must have received its ``count`` frames)."""
+    def close(self, partial: bool = False) -> None:
+        """Finalises the output. A ``.npy`` must have received its ``count`` frames, unless
+        ``partial`` (a stream damaged or interrupted part way): then it holds the frames
+        written so far (no frame at all: nothing is kept)."""
         if self._video is not None:
             self._video.close()
         if self._store is not None:
             store, self._store = self._store, None
             store.flush()
             del store
-            if self.frames != self._count:
+            if self.frames != self._count and not (partial and self.frames):
                 self._tmp.unlink(missing_ok=True)
                 raise LFValueError(f"{self.path}: {self.frames} of {self._count} frames written; nothing kept")
             try:
+                if self.frames != self._count:
+                    _truncate_npy(self._tmp, self.frames)
                 os.replace(self._tmp, self.path)
             except OSError as exc:
+                self._tmp.unlink(missing_ok=True)
                 raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
 
     def abort(self) -> None:
@@ -161,10 +166,30 @@ class FrameWriter:
         return self
 
     def __exit__(self, exc_type, *exc) -> None:
-        if exc_type is None or (exc_type is KeyboardInterrupt and self._ext != ".npy"):
+        if exc_type is None:
             self.close()
+        elif exc_type is KeyboardInterrupt:  # the frames so far, as a complete file
+            self.close(partial=True)
         else:
             self.abort()
+
+
+def _truncate_npy(path: Path, frames: int) -> None:
+    """Cuts a ``.npy`` of ``(count, ...)`` down to its first ``frames`` along axis 0: the
+    header's shape rewritten in place (padded to the header's length, as the format allows)
+    and the data after them dropped."""
+    with open(path, "r+b") as fh:
+        major, _ = np.lib.format.read_magic(fh)
+        read_header = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+        shape, fortran, dtype = read_header(fh)
+        data_start = fh.tell()
+        length_bytes = 2 if major == 1 else 4
+        header = f"{{'descr': {np.lib.format.dtype_to_descr(dtype)!r}, 'fortran_order': {fortran}, " \
+                 f"'shape': {(frames, *shape[1:])}, }}"
+        room = data_start - (6 + 2 + length_bytes)  # the old header's length, padding and newline included
+        fh.seek(6 + 2 + length_bytes)
+        fh.write(header.ljust(room - 1).encode("latin1") + b"\n")
+        fh.truncate(data_start + frames * int(np.prod(shape[1:], dtype=np.int64)) * dtype.itemsize)
 
 
 def _write_views(folder: Path, lf: np.ndarray, image_ext: str) -> None:

@@ -221,7 +221,8 @@ def test_frame_writer_writes_what_write_lf_writes(tmp_path, rng, name):
 
 def test_frame_writer_keeps_nothing_torn(tmp_path, rng):
     """A .npy short of its frame count, an error mid-way or a refused format leave no file;
-    Ctrl-C finalises a video with the frames written so far."""
+    Ctrl-C (or ``close(partial=True)``: a damaged stream) keeps a video or .npy of the
+    frames written so far."""
     from lfstream.io import FrameWriter
 
     video = random_lf(rng, (3, 3, 3, 8, 10, 3))
@@ -239,8 +240,18 @@ def test_frame_writer_keeps_nothing_torn(tmp_path, rng):
             w.write(video[1])
             raise KeyboardInterrupt
     np.testing.assert_array_equal(read_lf(tmp_path / "stopped.mp4"), video[:2])
+    with pytest.raises(KeyboardInterrupt):
+        with FrameWriter(tmp_path / "stopped.npy", 3) as w:
+            w.write(video[0])
+            w.write(video[1])
+            raise KeyboardInterrupt
+    np.testing.assert_array_equal(np.load(tmp_path / "stopped.npy"), video[:2])  # a valid .npy of two frames
+    w = FrameWriter(tmp_path / "damaged.npy", 3)
+    w.write(video[0])
+    w.close(partial=True)
+    np.testing.assert_array_equal(np.load(tmp_path / "damaged.npy", mmap_mode="r"), video[:1])
     with pytest.raises(LFStreamError, match="npz"):
         FrameWriter(tmp_path / "x.npz", 3)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["stopped.mp4"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.npy", "stopped.mp4", "stopped.npy"]
     with pytest.raises(LFFileError, match="already exists"):
         FrameWriter(tmp_path / "stopped.mp4")
