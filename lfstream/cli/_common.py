@@ -6,7 +6,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from collections.abc import Callable
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -105,6 +108,25 @@ def load_from_args(args: argparse.Namespace):
     return load_lf(args.input, read_options(args))
 
 
+@contextmanager
+def interrupt_after() -> Iterator[None]:
+    """Ctrl-C inside the block takes effect when it ends, so what the block writes (one
+    frame's outputs) is written whole. Only where Ctrl-C raises KeyboardInterrupt (Python's
+    own handler, in the main thread); anywhere else the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread() \
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
+
+
 def coding_layers(depth_hint: bool, residual: int | None, residual_mode: str | None,
                   hint_scale: int | None = None) -> str:
     """The layers of a stream beside its centre view, as the text outputs print them:
@@ -154,4 +176,4 @@ def emit(args: argparse.Namespace, result: dict, text: Callable[[dict], str] | s
 
 
 __all__ = ["parse_grid", "parse_size", "parse_float_list", "int_in", "float_in", "add_read_options", "read_options",
-           "load_from_args", "emit"]
+           "load_from_args", "emit", "interrupt_after"]

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.cli._common import add_read_options, emit, float_in, load_from_args, parse_float_list
+from lfstream.cli._common import add_read_options, emit, float_in, interrupt_after, load_from_args, parse_float_list
 from lfstream.errors import LFFileError, LFValueError
 from lfstream.io._fs import prepare_output_dir
 from lfstream.lightfield import axes_as_list, canonical_views
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     planes = plane_records(slopes)
     records: list[dict] = []
     plane_videos: list = []  # one focal-plane video each, frame after frame (a video input)
-    render_s, frames = 0.0, 0
+    render_s, frames, interrupted = 0.0, 0, False
     # frame by frame: a video's frames are read, refocused and written one at a time (the
     # video and its focal stacks were held whole: 1.2 GB for 20 frames of 7x7x375x540)
     try:
@@ -80,33 +80,35 @@ def run(args: argparse.Namespace) -> int:
             render_s += time.perf_counter() - t0
             if stack.dtype != np.uint8:
                 stack = np.clip(stack * 255.0 + 0.5, 0, 255).astype(np.uint8)
-            folder = out if single else out / f"frame_{t:06d}"
-            folder.mkdir(exist_ok=True)
-            for k, img in enumerate(stack):
-                name = folder / f"plane_{k:02d}.png"
-                write_image(name, img)
-                files.append(str(name))
-            if not args.no_sweep and single:
-                for ext in (".mp4", ".gif"):
-                    write_video(out / f"sweep{ext}", list(stack), fps=args.fps, lossless=False)
-                    files.append(str(out / f"sweep{ext}"))
-            elif not args.no_sweep:
-                if not plane_videos:
-                    plane_videos = [VideoWriter(out / f"plane_{k:02d}.mp4", source.fps or 30.0, lossless=False)
-                                    for k in range(len(stack))]
-                for writer, img in zip(plane_videos, stack):
-                    writer.write(img)
+            record = None
             if not args.no_viewer:
                 # click to focus needs the scene's disparity: the codec's hint estimator, per frame
                 from lfstream.codec.hint import estimate_disparity
                 from lfstream.viewer import disparity_record
 
-                records.append(disparity_record(t, estimate_disparity(frame, present=source.present)))
-            frames += 1
-    except KeyboardInterrupt:  # the planes' videos of the frames so far, finalised
-        for writer in plane_videos:
-            writer.close()
-        raise
+                record = disparity_record(t, estimate_disparity(frame, present=source.present))
+            with interrupt_after():  # a frame's planes, video frames and record are written together
+                folder = out if single else out / f"frame_{t:06d}"
+                folder.mkdir(exist_ok=True)
+                for k, img in enumerate(stack):
+                    name = folder / f"plane_{k:02d}.png"
+                    write_image(name, img)
+                    files.append(str(name))
+                if not args.no_sweep and single:
+                    for ext in (".mp4", ".gif"):
+                        write_video(out / f"sweep{ext}", list(stack), fps=args.fps, lossless=False)
+                        files.append(str(out / f"sweep{ext}"))
+                elif not args.no_sweep:
+                    if not plane_videos:
+                        plane_videos = [VideoWriter(out / f"plane_{k:02d}.mp4", source.fps or 30.0, lossless=False)
+                                        for k in range(len(stack))]
+                    for writer, img in zip(plane_videos, stack):
+                        writer.write(img)
+                if record is not None:
+                    records.append(record)
+                frames += 1
+    except KeyboardInterrupt:  # Ctrl-C: the outputs of the frames so far, finalised below
+        interrupted = True
     except BaseException:
         for writer in plane_videos:
             writer.abort()
@@ -124,12 +126,12 @@ def run(args: argparse.Namespace) -> int:
     summary = {"input": str(args.input), "method": args.method, "frames": frames, "planes": planes,
                "view_axes": axes_as_list(axes),
                "render_s": render_s, "output": str(out), "files": len(files),
-               "viewer": str(viewer) if viewer is not None else None}
+               "viewer": str(viewer) if viewer is not None else None, "interrupted": interrupted}
     reordered = "" if axes is None else f" (views reordered to the convention: view axes {axes_as_list(axes, 2)})"
     emit(args, summary, f"{len(slopes)} planes x {frames} frame(s) by {args.method} in {render_s:.3f} s{reordered}"
-         f" -> {out}"
+         f" -> {out}" + (" (interrupted)" if interrupted else "")
          + (f"\nopen {viewer.resolve().as_uri()} to click-to-focus" if viewer is not None else ""))
-    return 0
+    return 130 if interrupted else 0
 
 
 @dataclasses.dataclass

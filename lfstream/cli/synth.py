@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -34,8 +35,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from lfstream.cli._common import interrupt_after
     from lfstream.io import FrameWriter, write_lf
-    from lfstream.io._fs import atomic_path
+    from lfstream.io._fs import temp_sibling
+    from lfstream.io.writers import truncate_npy
     from lfstream.synth import SynthConfig, iter_clip, render_clip
 
     cfg = SynthConfig(frames=args.frames, views=args.views, size=tuple(args.size), seed=args.seed, layers=args.layers,
@@ -44,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     cfg.validate()
     out = args.output
     written = [str(out)]
-    render_s, lo, hi = 0.0, np.inf, -np.inf
+    render_s, lo, hi, done, interrupted = 0.0, np.inf, -np.inf, cfg.frames, False
     if out.suffix.lower() == ".npz":  # compressed whole: the clip is rendered in memory
         t0 = time.perf_counter()
         clip = render_clip(cfg)
@@ -55,23 +58,40 @@ def run(args: argparse.Namespace) -> int:
         # frame by frame: a video, a .npy or a folder as each frame is rendered, and the
         # disparity into a memory-mapped .npy, so a long clip never sits in memory
         disp_path = check_new_file(out.with_name(out.stem + "_disparity.npy"), args.overwrite)
-        n, (h, w) = cfg.views, cfg.size
-        with FrameWriter(out, cfg.frames, fps=args.fps, overwrite=args.overwrite) as writer, \
-                atomic_path(disp_path) as disp_tmp:
+        n, (h, w), done = cfg.views, cfg.size, 0
+        writer = FrameWriter(out, cfg.frames, fps=args.fps, overwrite=args.overwrite)
+        disp_tmp = temp_sibling(disp_path)
+        try:
             disparity = np.lib.format.open_memmap(disp_tmp, mode="w+", dtype=np.float32,
                                                   shape=(cfg.frames, n, n, h, w, 1))
             t0 = time.perf_counter()
-            for t, (lf, disp) in enumerate(iter_clip(cfg)):
-                render_s += time.perf_counter() - t0
-                writer.write(lf)
-                disparity[t, ..., 0] = disp
-                lo, hi = min(lo, float(disp.min())), max(hi, float(disp.max()))
-                t0 = time.perf_counter()
+            try:
+                for t, (lf, disp) in enumerate(iter_clip(cfg)):
+                    render_s += time.perf_counter() - t0
+                    with interrupt_after():  # a frame and its disparity are written together
+                        writer.write(lf)
+                        disparity[t, ..., 0] = disp
+                        lo, hi = min(lo, float(disp.min())), max(hi, float(disp.max()))
+                        done += 1
+                    t0 = time.perf_counter()
+            except KeyboardInterrupt:  # Ctrl-C: the frames so far, both files finalised
+                interrupted = True
+                if not done:
+                    raise
             disparity.flush()
             del disparity
+            if done < cfg.frames:
+                truncate_npy(disp_tmp, done)
+            writer.close(partial=interrupted)
+            os.replace(disp_tmp, disp_path)
+        except BaseException:
+            writer.abort()
+            disp_tmp.unlink(missing_ok=True)
+            raise
         written.append(str(disp_path))
-    info = {"output": written, "frames": cfg.frames, "views": [cfg.views, cfg.views], "size": list(cfg.size),
-            "disparity_range": [lo, hi], "render_s": render_s}
-    emit(args, info, lambda r: f"{cfg.frames} frames of {cfg.views}x{cfg.views} views, {cfg.size[0]}x{cfg.size[1]}, "
-         f"disparity {r['disparity_range'][0]:.2f}..{r['disparity_range'][1]:.2f} -> {', '.join(written)}")
-    return 0
+    info = {"output": written, "frames": done, "views": [cfg.views, cfg.views], "size": list(cfg.size),
+            "disparity_range": [lo, hi], "render_s": render_s, "interrupted": interrupted}
+    emit(args, info, lambda r: f"{done} frames of {cfg.views}x{cfg.views} views, {cfg.size[0]}x{cfg.size[1]}, "
+         f"disparity {r['disparity_range'][0]:.2f}..{r['disparity_range'][1]:.2f} -> {', '.join(written)}"
+         + (f" (interrupted after {done} of {cfg.frames})" if interrupted else ""))
+    return 130 if interrupted else 0

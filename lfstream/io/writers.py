@@ -145,7 +145,7 @@ class FrameWriter:
                 raise LFValueError(f"{self.path}: {self.frames} of {self._count} frames written; nothing kept")
             try:
                 if self.frames != self._count:
-                    _truncate_npy(self._tmp, self.frames)
+                    truncate_npy(self._tmp, self.frames)
                 os.replace(self._tmp, self.path)
             except OSError as exc:
                 self._tmp.unlink(missing_ok=True)
@@ -174,7 +174,7 @@ class FrameWriter:
             self.abort()
 
 
-def _truncate_npy(path: Path, frames: int) -> None:
+def truncate_npy(path: Path, frames: int) -> None:
     """Cuts a ``.npy`` of ``(count, ...)`` down to its first ``frames`` along axis 0: the
     header's shape rewritten in place (padded to the header's length, as the format allows)
     and the data after them dropped."""
@@ -205,4 +205,4 @@ def _npy_bytes(arr: np.ndarray) -> bytes:
     return bio.getvalue()
 
 
-__all__ = ["write_lf", "FrameWriter"]
+__all__ = ["write_lf", "FrameWriter", "truncate_npy"]

@@ -266,8 +266,15 @@ class FileChannel:
         while not self._started.wait(_POLL_S):
             if stop is not None and stop.is_set():
                 raise StoppedError("stopped before the stream started")
-        path = self._tmp if self._tmp.exists() else self.path
-        return _FollowReader(path, self._done, stop)
+        for path in (self._tmp, self.path):  # the file is renamed when the sender closes it
+            try:
+                return _FollowReader(path, self._done, stop)
+            except FileNotFoundError:
+                continue
+        # closed without a header: the sender stopped before its first frame
+        if stop is not None and stop.is_set():
+            raise StoppedError("stopped before the stream started")
+        raise TransportError(f"{self.path}: the sender closed the stream before writing its header")
 
     def header(self, stop: threading.Event | None = None) -> StreamHeader:
         self._reader = io.BufferedReader(self._open_reader(stop))

@@ -501,3 +501,71 @@ def test_info_describes_videos_and_streams_without_decoding_them(capsys, tmp_pat
     for name in ("clip.mp4", "clip.lfs"):
         code, out, _ = run(capsys, "info", tmp_path / name, "--json", *extra)
         assert code == 0 and json.loads(out) == json.loads(json.dumps(want[name]))
+
+
+def test_interrupt_after_lets_a_block_finish_before_ctrl_c_takes_effect():
+    """Ctrl-C inside ``interrupt_after`` raises KeyboardInterrupt when the block ends, not in
+    the middle of it; Python's handler is back afterwards."""
+    import os
+    import signal
+
+    from lfstream.cli._common import interrupt_after
+
+    done = []
+    with pytest.raises(KeyboardInterrupt):
+        with interrupt_after():
+            os.kill(os.getpid(), signal.SIGINT)
+            done.append("rest of the block")
+    assert done == ["rest of the block"] and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_refocus_interrupted_keeps_whole_frames_and_their_index(capsys, tmp_path, monkeypatch):
+    """Ctrl-C during ``refocus`` of a video: exit 130, and the frames refocused so far are
+    complete (every plane's PNG, the plane videos, planes.json, the viewer's disparity)."""
+    import lfstream
+    import lfstream.refocus as refocus_pkg
+    from lfstream.io import iter_video_frames
+
+    lfstream.write_lf(tmp_path / "clip.mp4", synth_clip(5, 5, (32, 40), seed=2).lf, fps=10)
+    real, calls = refocus_pkg.focal_stack, []
+
+    def stack_then_stop(*a, **k):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(refocus_pkg, "focal_stack", stack_then_stop)
+    code, out, _ = run(capsys, "refocus", tmp_path / "clip.mp4", "-o", tmp_path / "out", "--alphas", "0.8,1,1.25",
+                       "--json")
+    summary = json.loads(out)
+    assert code == 130 and summary["interrupted"] and summary["frames"] == 2
+    assert sorted(p.name for p in (tmp_path / "out").glob("frame_*")) == ["frame_000000", "frame_000001"]
+    assert all(len(list(p.iterdir())) == 3 for p in (tmp_path / "out").glob("frame_*"))
+    assert len(list(iter_video_frames(tmp_path / "out" / "plane_02.mp4"))) == 2
+    assert json.loads((tmp_path / "out" / "planes.json").read_text())["planes"]
+    assert len(json.loads((tmp_path / "out" / "disparity.json").read_text())["frames"]) == 2
+
+
+@pytest.mark.parametrize("name", ["clip.mp4", "clip.npy"])
+def test_synth_interrupted_keeps_the_frames_so_far_with_their_disparity(capsys, tmp_path, monkeypatch, name):
+    """Ctrl-C during ``synth``: exit 130, the output and its disparity file hold the frames
+    rendered so far (a .npy cut to them), the same as an uninterrupted run's first frames."""
+    import lfstream.synth as synth
+    from lfstream import read_lf
+
+    real = synth.iter_clip
+
+    def two_then_stop(cfg):
+        for t, frame in enumerate(real(cfg)):
+            if t == 2:
+                raise KeyboardInterrupt
+            yield frame
+
+    monkeypatch.setattr(synth, "iter_clip", two_then_stop)
+    code, out, _ = run(capsys, "synth", tmp_path / name, "--frames", 5, "--views", 3, "--size", "24x32", "--json")
+    assert code == 130 and json.loads(out)["frames"] == 2 and json.loads(out)["interrupted"]
+    clip = synth.render_clip(synth.SynthConfig(frames=5, views=3, size=(24, 32)))
+    np.testing.assert_array_equal(read_lf(tmp_path / name), clip.lf[:2])
+    np.testing.assert_array_equal(np.load(tmp_path / "clip_disparity.npy"), clip.disparity[:2, ..., None])
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
