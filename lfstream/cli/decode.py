@@ -6,7 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
-from lfstream.cli._common import emit, int_in
+from lfstream.cli._common import emit, int_in, interrupt_after
 from lfstream.codec.decoder import BATCH_RANGE, DEPTH_MODES, HANCE_MODES
 
 HELP = "decode an .lfs stream to a light field (.npy, folder or video)"
@@ -57,17 +57,18 @@ def run(args: argparse.Namespace) -> int:
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
                                  device=args.device, batch=args.batch, deblock=not args.no_deblock):
-                if by_frame:
-                    t_write = time.perf_counter()
-                    if writer is None:
-                        writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite)
-                    writer.write(f.lf)
-                    write_s += time.perf_counter() - t_write
-                else:
-                    frames.append(f.lf)
-                count += 1
-                if args.disparity_out is not None:
-                    write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
+                with interrupt_after():  # a frame's outputs are written whole
+                    if by_frame:
+                        t_write = time.perf_counter()
+                        if writer is None:
+                            writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite)
+                        writer.write(f.lf)
+                        write_s += time.perf_counter() - t_write
+                    else:
+                        frames.append(f.lf)
+                    count += 1
+                    if args.disparity_out is not None:
+                        write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
     except OSError as exc:
         if writer is not None:
             writer.abort()
