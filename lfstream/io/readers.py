@@ -320,6 +320,9 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None) -
         grid, fps, count = opts.grid or info.grid, info.fps, info.count
         if grid is None:
             raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
+        (mh, mw), (u, v) = info.size, grid
+        if u < 1 or v < 1 or mh % u or mw % v:  # refused before a frame is read (a stream: before its folder fills)
+            raise LFShapeError(f"{path}: mosaic size {mh}x{mw} is not a multiple of the view grid {u}x{v}")
         decoded = (from_mosaic(img, grid) for img in iter_video_frames(path, opts.max_frames))
     if count and opts.max_frames:
         count = min(count, opts.max_frames)

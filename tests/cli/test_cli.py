@@ -569,3 +569,16 @@ def test_synth_interrupted_keeps_the_frames_so_far_with_their_disparity(capsys, 
     np.testing.assert_array_equal(read_lf(tmp_path / name), clip.lf[:2])
     np.testing.assert_array_equal(np.load(tmp_path / "clip_disparity.npy"), clip.disparity[:2, ..., None])
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_a_video_whose_size_does_not_fit_the_grid_is_refused_before_streaming(capsys, tmp_path, monkeypatch):
+    """A mosaic video whose frame size is not a multiple of the grid given is refused from
+    its container's size, in one line, before a frame is read: no output folder is left
+    (it was refused by the producer stage at frame 0, after the folder was made)."""
+    import lfstream
+
+    monkeypatch.chdir(tmp_path)
+    lfstream.write_lf(tmp_path / "clip.mp4", synth_clip(2, 5, (32, 40), seed=1).lf)
+    code, _, err = run(capsys, "stream", "clip.mp4", "--grid", "3x3")
+    assert code == 2 and "not a multiple of the view grid 3x3" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "lfstream-out").exists()
