@@ -193,6 +193,14 @@ def centre_view(lf: ArrayT) -> ArrayT:
     return lf[..., u0, v0, :, :, :]
 
 
+def check_crop(views: tuple[int, int], k: int) -> None:
+    """Raises :class:`LFValueError` unless ``k`` is a central crop :func:`crop_views` can
+    take of a ``views`` grid (a reader checks it before the frames arrive)."""
+    u, v = views
+    if not isinstance(k, (int, np.integer)) or k < 1 or k > min(u, v):
+        raise LFValueError(f"views: crop size must be an integer in 1..{min(u, v)}, got {k!r}")
+
+
 def crop_views(lf: ArrayT, k: int) -> ArrayT:
     """Keeps the central ``k x k`` views, so the centre view stays the centre view.
 
@@ -201,8 +209,7 @@ def crop_views(lf: ArrayT, k: int) -> ArrayT:
         - output: ``(*, k, k, H, W, C)``
     """
     u, v, *_ = lf_dims(lf)
-    if not isinstance(k, (int, np.integer)) or k < 1 or k > min(u, v):
-        raise LFValueError(f"views: crop size must be an integer in 1..{min(u, v)}, got {k!r}")
+    check_crop((u, v), k)
     su, sv = u // 2 - k // 2, v // 2 - k // 2
     return lf[..., su : su + k, sv : sv + k, :, :, :]
 
@@ -478,6 +485,7 @@ __all__ = [
     "lf_dims",
     "centre_index",
     "centre_view",
+    "check_crop",
     "crop_views",
     "downsample_angular",
     "to_sensor",

@@ -32,7 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.codec.bitstream import read_header
+    from lfstream.codec.bitstream import count_packets, read_header
     from lfstream.codec.decoder import iter_decode, stack_frames
     from lfstream.errors import BitstreamError, LFFileError
     from lfstream.io import FrameWriter, write_lf, write_pfm
@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
             header = read_header(fh)
             fps = header.fps
             if args.output.suffix.lower() == ".npy":
-                expected = _complete_packets(fh, header)
+                expected = count_packets(fh, header)[0]  # the frames up to any damage
             fh.seek(0)
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
@@ -97,17 +97,3 @@ def run(args: argparse.Namespace) -> int:
     emit(args, result, f"{count} frame(s) decoded in {decode_s:.3f} s -> {args.output}")
     return 0
 
-
-def _complete_packets(fh, header) -> int:
-    """How many packets of the stream after its header are complete (read, checksums and
-    all, up to the first damaged one): the frames a decode will give."""
-    from lfstream.codec.bitstream import iter_packets
-    from lfstream.errors import BitstreamError
-
-    count = 0
-    try:
-        for _ in iter_packets(fh, header):
-            count += 1
-    except BitstreamError:
-        pass
-    return count

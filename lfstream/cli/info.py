@@ -111,54 +111,24 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _describe_input(args: argparse.Namespace) -> dict:
-    """:func:`describe` of the input. A mosaic video and an ``.lfs`` stream are described
-    from their container and header, their frames counted but not decoded (both were read
-    whole: 3.5 s and 600 MB for 20 frames of 7x7x375x540, against a few milliseconds);
-    everything else is read."""
+    """:func:`describe` of the input. An LF video (a mosaic video, an ``.lfs``) is described
+    from its container or header, its frames counted but none decoded
+    (:func:`lfstream.io.open_video_lf`; it was read whole: 3.5 s and 600 MB for 20 frames of
+    7x7x375x540, against a few milliseconds); everything else is read."""
+    from lfstream.cli._common import read_options
     from lfstream.errors import LFFormatError
-    from lfstream.io import VIDEO_EXTS
+    from lfstream.io import VIDEO_EXTS, open_video_lf, reads_lazily
 
-    path, ext = args.input, args.input.suffix.lower()
-    if not path.is_file() or not (ext in VIDEO_EXTS or ext == ".lfs"):
+    if not reads_lazily(args.input):
         return describe(load_from_args(args))
-    if ext == ".lfs":
-        from lfstream.codec.bitstream import iter_packets, read_header
-
-        with open(path, "rb") as fh:
-            header = read_header(fh)
-            frames = sum(1 for _ in iter_packets(fh, header))
-        if frames == 0:
-            from lfstream.errors import BitstreamError
-
-            raise BitstreamError(f"{path}: stream holds no frames")
-        views, size, fps, fmt = header.views, header.size, header.fps, "lfs"
-    else:
-        from lfstream.io.video import video_info
-
-        info = video_info(path, count_frames=True)
-        grid = args.grid or info.grid
-        if grid is None:
-            raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
-        (mh, mw), (u, v) = info.size, grid
-        if mh % u or mw % v:
-            from lfstream.errors import LFShapeError
-
-            raise LFShapeError(f"mosaic: size {mh}x{mw} is not a multiple of the view grid {u}x{v}")
-        if not info.count:
-            raise LFFormatError(f"{path}: contains no frames")
-        frames, views, size, fps, fmt = info.count, grid, (mh // u, mw // v), info.fps, "video"
-    if args.crop is not None:
-        from lfstream.errors import LFValueError
-
-        if args.crop > min(views):
-            raise LFValueError(f"views: crop size must be an integer in 1..{min(views)}, got {args.crop!r}")
-        views = (args.crop, args.crop)
-    frames = min(frames, args.max_frames or frames)
-    u, v = views
-    h, w = size
-    out = {"path": str(path), "format": fmt, "frames": frames, "views": [u, v], "size": [h, w], "channels": 3,
-           "dtype": "uint8", "bytes": frames * u * v * h * w * 3, "fps": fps, "missing_views": None,
+    video = open_video_lf(args.input, read_options(args), count_frames=True)
+    if not video.count:
+        raise LFFormatError(f"{args.input}: contains no frames")
+    fmt = "video" if args.input.suffix.lower() in VIDEO_EXTS else "lfs"
+    (u, v), (h, w), frames = video.views, video.size, video.count
+    out = {"path": str(args.input), "format": fmt, "frames": frames, "views": [u, v], "size": [h, w], "channels": 3,
+           "dtype": "uint8", "bytes": frames * u * v * h * w * 3, "fps": video.fps, "missing_views": None,
            "has_weight": False, "has_disparity": False}
     if fmt == "lfs":
-        out["stream"] = describe_stream(path, frames)
+        out["stream"] = describe_stream(args.input, frames)
     return out

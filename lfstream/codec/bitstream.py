@@ -348,6 +348,19 @@ def iter_packets(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits()) 
         expected += 1
 
 
+def count_packets(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits()) -> tuple[int, BitstreamError | None]:
+    """How many complete packets follow the header (read, checksums and all, up to the
+    first damaged one: the frames a decode gives), and the damage that ended the count
+    (``None`` where the stream ends cleanly)."""
+    count = 0
+    try:
+        for _ in iter_packets(fh, header, limits):
+            count += 1
+    except BitstreamError as exc:
+        return count, exc
+    return count, None
+
+
 class StreamWriter:
     """Writes a header and packets to a binary file-like object."""
 
@@ -375,6 +388,7 @@ def split_stream(data: bytes, limits: Limits = Limits()) -> tuple[StreamHeader, 
 
 
 __all__ = [
+    "count_packets",
     "MAGIC",
     "VERSION",
     "VERSIONS",

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, Limits, Packet, StreamHeader, iter_packets, read_header
+from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, Limits, Packet, StreamHeader, count_packets, iter_packets, read_header
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
 from lfstream.codec.jpeg import post_filter_jpeg
@@ -469,11 +469,13 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
     return stack_frames(frames), header.fps
 
 
-def lfs_frames(path: str | os.PathLike, max_frames: int | None = None) -> tuple[Iterator[np.ndarray], float, int]:
+def lfs_frames(path: str | os.PathLike, max_frames: int | None = None
+               ) -> tuple[Iterator[np.ndarray], StreamHeader, int]:
     """An ``.lfs`` file as a light field for the readers (:func:`lfstream.io.open_video_lf`,
     :func:`lfstream.io.load_lf`): its frames decoded one at a time as :func:`decode` decodes
-    them (the hint where the stream has one), its frame rate, and its frame count (at most
-    ``max_frames``; the packets are counted, checksums and all, before any is decoded). It
+    them (the hint where the stream has one), its header (frame rate, views, view size),
+    and its frame count (at most ``max_frames``; the packets are counted, checksums and
+    all, before any is decoded). It
     was decoded whole with flat disparity, for ``info``, which reads headers now: every
     other command given an ``.lfs`` (``refocus``, ``stream``, ``view``) then saw the centre
     view copied to every view, a light field without parallax.
@@ -486,11 +488,13 @@ def lfs_frames(path: str | os.PathLike, max_frames: int | None = None) -> tuple[
     try:
         with open(path, "rb") as fh:
             header = read_header(fh)
-            count = sum(1 for _ in iter_packets(fh, header))
+            count, damage = count_packets(fh, header)
     except OSError as exc:
         raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
     except BitstreamError as exc:
         raise BitstreamError(f"{path}: {exc}") from exc
+    if damage is not None:
+        raise BitstreamError(f"{path}: {damage}") from damage
     if count == 0:
         raise BitstreamError(f"{path}: stream holds no frames")
 
@@ -504,7 +508,7 @@ def lfs_frames(path: str | os.PathLike, max_frames: int | None = None) -> tuple[
         except BitstreamError as exc:
             raise BitstreamError(f"{path}: {exc}") from exc
 
-    return frames(), header.fps, min(count, max_frames or count)
+    return frames(), header, min(count, max_frames or count)
 
 
 __all__ = ["DEPTH_MODES", "HANCE_MODES", "HANCE_MAX_QUALITY", "BATCH_RANGE", "BESIDE_MIN_BITS", "Decoder",

@@ -33,7 +33,7 @@ import numpy as np
 from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError, LFValueError
 from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image
 from lfstream.io.video import VIDEO_EXTS, collect_frames, iter_video_frames, video_grid_and_fps, video_info
-from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_lf, from_mosaic
+from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_crop, check_lf, crop_views, from_mosaic
 
 _RE_RC = re.compile(r"^(\d+)_(\d+)$")
 _RE_HCI = re.compile(r"^input_Cam(\d{3})$")
@@ -263,7 +263,7 @@ def _classify_folder(folder: Path) -> str:
 
 #: Formats whose decoder lives in a higher layer (the codec decodes ``.lfs``): imported by
 #: name when one is read (``lfstream.io`` does not import the codec); the function gives
-#: ``(frames iterator, fps, count)``.
+#: ``(frames iterator, header, count)``.
 _LAYERED_READERS = {".lfs": ("lfstream.codec.decoder", "lfs_frames")}
 #: What :func:`open_video_lf` reads frame by frame.
 LAZY_EXTS = VIDEO_EXTS + tuple(_LAYERED_READERS)
@@ -284,26 +284,35 @@ class VideoLF:
         frames: ``(U, V, H, W, 3)`` uint8 frames, C-contiguous, with the options' crop and
             flips applied; one frame in memory at a time.
         fps: the container's frame rate, or ``None``.
-        count: how many frames it yields where the container says how many it holds (at
-            most ``max_frames``), else ``None``.
+        count: how many frames it yields where the file says (at most ``max_frames``;
+            counted where asked for), else ``None``.
+        views: ``(U, V)`` of the frames it yields (the crop applied).
+        size: ``(H, W)`` of their views.
         path: the file.
     """
 
     frames: Iterator[np.ndarray]
     fps: float | None
     count: int | None
+    views: tuple[int, int]
+    size: tuple[int, int]
     path: Path
 
 
-def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None) -> VideoLF:
+def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, count_frames: bool = False) -> VideoLF:
     """An LF video read lazily — a mosaic video (grid from ``options.grid`` or the file's
     metadata) or an ``.lfs`` stream (decoded as :func:`lfstream.decode` decodes it) — with
     the crop and flips of ``options`` applied to each frame: what :func:`load_lf` reads of
-    it, without holding the video in memory.
+    it, without holding the video in memory. Its frame count, views and view size come
+    from the container or header, the grid and the crop are checked, before any frame is
+    decoded; ``count_frames``: count a video's packets where its container keeps no count
+    (Matroska), reading the file once but decoding nothing.
 
     Raises:
         LFFileError: the file does not exist.
         LFFormatError: not a readable video, or no grid known.
+        LFShapeError, LFValueError: a mosaic that is not a multiple of the grid, a crop
+            larger than the grid.
         BitstreamError: a damaged ``.lfs`` (counted before the first frame is decoded).
     """
     opts = options or ReadOptions()
@@ -314,29 +323,37 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None) -
         import importlib
 
         module, name = _LAYERED_READERS[path.suffix.lower()]
-        decoded, fps, count = getattr(importlib.import_module(module), name)(path, max_frames=opts.max_frames)
+        decoded, header, count = getattr(importlib.import_module(module), name)(path, max_frames=opts.max_frames)
+        fps, views, size = header.fps, header.views, header.size
     else:
-        info = video_info(path)
+        info = video_info(path, count_frames=count_frames)
         grid, fps, count = opts.grid or info.grid, info.fps, info.count
         if grid is None:
             raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
         (mh, mw), (u, v) = info.size, grid
         if u < 1 or v < 1 or mh % u or mw % v:  # refused before a frame is read (a stream: before its folder fills)
             raise LFShapeError(f"{path}: mosaic size {mh}x{mw} is not a multiple of the view grid {u}x{v}")
-        decoded = (from_mosaic(img, grid) for img in iter_video_frames(path, opts.max_frames))
+        views, size = (u, v), (mh // u, mw // v)
+
+        def mosaics() -> Iterator[np.ndarray]:  # the video is opened for decoding at the first frame asked for
+            for img in iter_video_frames(path, opts.max_frames):
+                yield from_mosaic(img, grid)
+
+        decoded = mosaics()
+    if opts.crop is not None:
+        check_crop(views, opts.crop)
+        views = (opts.crop, opts.crop)
     if count and opts.max_frames:
         count = min(count, opts.max_frames)
     flips = tuple(a for a, f in ((0, opts.flip_u), (1, opts.flip_v)) if f)
 
     def frames() -> Iterator[np.ndarray]:
-        from lfstream.lightfield import crop_views
-
         for lf in decoded:
             if opts.crop is not None:
                 lf = crop_views(lf, opts.crop)
             yield np.ascontiguousarray(np.flip(lf, axis=flips) if flips else lf)
 
-    return VideoLF(frames(), fps, count, path)
+    return VideoLF(frames(), fps, count, tuple(views), tuple(size), path)
 
 
 def load_lf(path: str | os.PathLike, options: ReadOptions | None = None, **kwargs) -> LoadedLF:
@@ -394,8 +411,6 @@ def load_lf(path: str | os.PathLike, options: ReadOptions | None = None, **kwarg
 
 
 def _apply_crop(loaded: LoadedLF, k: int) -> None:
-    from lfstream.lightfield import crop_views
-
     loaded.lf = np.ascontiguousarray(crop_views(loaded.lf, k))
     u, v = loaded.lf.shape[-5:-3]
     for name in ("present", "weight", "disparity"):

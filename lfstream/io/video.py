@@ -18,7 +18,6 @@ import numpy as np
 
 from lfstream.errors import LFFileError, LFFormatError, LFShapeError, LFValueError
 from lfstream.io._fs import temp_sibling
-from lfstream.lightfield import from_mosaic
 
 VIDEO_EXTS = (".mp4", ".mkv", ".avi", ".mov", ".webm", ".nut")
 #: Metadata key a mosaic video stores its view grid under ("UxV").
@@ -153,13 +152,12 @@ def collect_frames(frames: Iterator[np.ndarray], count: int | None, source: Path
 def read_mosaic_video(
     path: Path, grid: tuple[int, int] | None = None, max_frames: int | None = None
 ) -> tuple[np.ndarray, float | None]:
-    """Reads a video whose frames are SAI mosaics; returns ``((T, U, V, H, W, 3), fps)``."""
-    info = video_info(path)
-    grid = grid or info.grid
-    if grid is None:
-        raise LFFormatError(f"{path}: the view grid is not in the file's metadata; pass grid=(U, V) / --grid UxV")
-    count = min(info.count, max_frames) if info.count and max_frames else info.count
-    return collect_frames((from_mosaic(f, grid) for f in iter_video_frames(path, max_frames)), count, path), info.fps
+    """Reads a video whose frames are SAI mosaics; returns ``((T, U, V, H, W, 3), fps)``
+    (:func:`lfstream.io.open_video_lf`'s frames, collected)."""
+    from lfstream.io.readers import ReadOptions, open_video_lf  # the readers build on this module
+
+    video = open_video_lf(path, ReadOptions(grid=grid, max_frames=max_frames))
+    return collect_frames(video.frames, video.count, Path(path)), video.fps
 
 
 class VideoWriter:
