@@ -4,11 +4,13 @@ the reading options, and the one way a result is printed (strict JSON or text)."
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import itertools
 import json
 import math
 import signal
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -108,6 +110,54 @@ def load_from_args(args: argparse.Namespace):
     return load_lf(args.input, read_options(args))
 
 
+@dataclasses.dataclass
+class InputFrames:
+    """A command's input as frames (:func:`read_input`).
+
+    Attributes:
+        first: frame 0 ``(U, V, H, W, C)`` (the encoder's check and the refocus's view axes
+            look at it first).
+        frames: every frame in order, frame 0 included.
+        count: how many (``None`` where an LF video read frame by frame does not say).
+        whole: the ``(T, U, V, H, W, C)`` array where the input was read whole, else ``None``.
+        present: ``(U, V)`` mask of the views that exist, ``None`` for all.
+        fps: the input's frame rate, if it records one.
+    """
+
+    first: np.ndarray
+    frames: Iterable[np.ndarray]
+    count: int | None
+    whole: np.ndarray | None
+    present: np.ndarray | None
+    fps: float | None
+
+
+def read_input(args: argparse.Namespace, whole: bool = False, count_frames: bool = False) -> InputFrames:
+    """``args.input`` read with the reading flags: an LF video (a mosaic video, an ``.lfs``)
+    frame by frame (:func:`lfstream.io.open_video_lf`: one 30 MB frame of 7x7x375x540 in
+    memory, not the whole video; ``count_frames``: its frames counted where the container
+    keeps no count) unless the caller needs it ``whole``; anything else read whole.
+
+    Raises:
+        LFStreamError: what the readers raise; a video without a frame.
+    """
+    from lfstream.errors import LFFormatError
+    from lfstream.io import open_video_lf, reads_lazily
+    from lfstream.lightfield import check_lf
+
+    if not whole and reads_lazily(args.input):
+        video = open_video_lf(args.input, read_options(args), count_frames=count_frames)
+        first = next(video.frames, None)
+        if first is None:
+            raise LFFormatError(f"{args.input}: contains no frames")
+        check_lf(first)  # checked as a light field read whole is
+        return InputFrames(first, itertools.chain([first], video.frames), video.count, None, None, video.fps)
+    loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
+    check_lf(loaded.lf)
+    lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
+    return InputFrames(lf[0], lf, len(lf), lf, loaded.present, loaded.fps)
+
+
 @contextmanager
 def interrupt_after() -> Iterator[None]:
     """Ctrl-C inside the block takes effect when it ends, so what the block writes (one
@@ -176,4 +226,4 @@ def emit(args: argparse.Namespace, result: dict, text: Callable[[dict], str] | s
 
 
 __all__ = ["parse_grid", "parse_size", "parse_float_list", "int_in", "float_in", "add_read_options", "read_options",
-           "load_from_args", "emit", "interrupt_after"]
+           "load_from_args", "InputFrames", "read_input", "emit", "interrupt_after"]

@@ -4,20 +4,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import itertools
 import time
-from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from lfstream.cli._common import add_read_options, emit, float_in, int_in, load_from_args
+from lfstream.cli._common import add_read_options, emit, float_in, int_in, read_input
 from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS
 from lfstream.codec.hint import HintOptions
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.residual import RESIDUAL_MODES
-
-if TYPE_CHECKING:
-    import numpy as np
 
 HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre view + depth hint)"
 
@@ -66,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
 
     check_new_file(args.output, args.overwrite)
     check_device(args.device)  # a bad device fails before any reading or encoding
-    source = _read_input(args)
+    # rate control (--bpp) encodes every frame while it searches: it reads the input whole
+    source = read_input(args, whole=args.bpp is not None)
     frames, present, views, size = source.frames, source.present, source.first.shape[:2], source.first.shape[2:4]
     fps = args.fps or source.fps or 30.0
     quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
@@ -121,39 +116,3 @@ def run(args: argparse.Namespace) -> int:
          + (f", residual q{residual} {residual_mode} ({r['residual_bpp']:.5f} bpp)" if residual is not None else "")
          + f", encoded in {r['encode_s']:.3f} s")
     return 0
-
-
-
-@dataclasses.dataclass
-class _Input:
-    """What ``lfstream encode`` reads: frame 0 (the default's check codes it first), every
-    frame in order (frame 0 included) and, where the input was read whole, the video array
-    (rate control needs it)."""
-
-    first: np.ndarray
-    frames: Iterable[np.ndarray]
-    whole: np.ndarray | None
-    present: np.ndarray | None
-    fps: float | None
-
-
-def _read_input(args: argparse.Namespace) -> _Input:
-    """The input of ``lfstream encode``. An LF video (a mosaic video, an ``.lfs``) is read
-    frame by frame (:func:`lfstream.io.open_video_lf`: one 30 MB frame of 7x7x375x540 in
-    memory, not the whole video) except for rate control (``--bpp``), which encodes every
-    frame while it searches."""
-    from lfstream.cli._common import read_options
-    from lfstream.codec.encoder import frames_of
-    from lfstream.errors import LFFormatError
-    from lfstream.io import open_video_lf, reads_lazily
-
-    if args.bpp is None and reads_lazily(args.input):
-        video = open_video_lf(args.input, read_options(args))
-        first = next(video.frames, None)
-        if first is None:
-            raise LFFormatError(f"{args.input}: contains no frames")
-        frames_of(first)  # checked as a light field read whole is
-        return _Input(first, itertools.chain([first], video.frames), None, None, video.fps)
-    loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
-    whole = frames_of(loaded.lf)
-    return _Input(whole[0], whole, whole, loaded.present, loaded.fps)

@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import itertools
 import time
-from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
-from lfstream.cli._common import add_read_options, emit, float_in, interrupt_after, load_from_args, parse_float_list
+from lfstream.cli._common import add_read_options, emit, float_in, interrupt_after, parse_float_list, read_input
 from lfstream.errors import LFFileError, LFValueError
 from lfstream.io._fs import prepare_output_dir
 from lfstream.lightfield import axes_as_list, canonical_views
@@ -59,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         slopes = resolve_slopes(args.alphas, args.slopes)
     if args.output.exists() and (not args.output.is_dir() or any(args.output.iterdir())):
         raise LFFileError(f"{args.output}: already exists and is not an empty folder")
-    source = _read_input(args)
+    source = read_input(args, count_frames=True)
     axes = _view_axes(source.first, source.present) if args.axes == "auto" else None
     extra = {"device": args.device} if args.method == "refnet" else {}
     out = prepare_output_dir(args.output)
@@ -132,39 +129,6 @@ def run(args: argparse.Namespace) -> int:
          f" -> {out}" + (" (interrupted)" if interrupted else "")
          + (f"\nopen {viewer.resolve().as_uri()} to click-to-focus" if viewer is not None else ""))
     return 130 if interrupted else 0
-
-
-@dataclasses.dataclass
-class _Input:
-    """What ``lfstream refocus`` reads: frame 0 (the view axes are detected on it), every
-    frame in order, how many there are, the present-view mask and the frame rate."""
-
-    first: np.ndarray
-    frames: Iterable[np.ndarray]
-    count: int
-    present: np.ndarray | None
-    fps: float | None
-
-
-def _read_input(args: argparse.Namespace) -> _Input:
-    """The input of ``lfstream refocus``: an LF video (a mosaic video, an ``.lfs``) frame by
-    frame (:func:`lfstream.io.open_video_lf`), anything else read whole."""
-    from lfstream.cli._common import read_options
-    from lfstream.errors import LFFormatError
-    from lfstream.io import open_video_lf, reads_lazily
-    from lfstream.io.video import video_info
-
-    if reads_lazily(args.input):
-        video = open_video_lf(args.input, read_options(args))
-        count = video.count or video_info(args.input, count_frames=True).count
-        first = next(video.frames, None)
-        if first is None or not count:
-            raise LFFormatError(f"{args.input}: contains no frames")
-        count = min(count, args.max_frames or count)
-        return _Input(first, itertools.chain([first], video.frames), count, None, video.fps)
-    loaded = load_from_args(args)
-    lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
-    return _Input(lf[0], lf, len(lf), loaded.present, loaded.fps)
 
 
 def _view_axes(first: np.ndarray, present: np.ndarray | None) -> np.ndarray | None:

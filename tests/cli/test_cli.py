@@ -442,8 +442,8 @@ def test_encode_reads_a_video_frame_by_frame_into_the_streams_bytes(capsys, tmp_
     opened = []
     real = lio.open_video_lf
 
-    def spy(path, options=None):
-        opened.append(real(path, options))
+    def spy(path, options=None, **kwargs):
+        opened.append(real(path, options, **kwargs))
         return opened[-1]
 
     monkeypatch.setattr(lio, "open_video_lf", spy)
