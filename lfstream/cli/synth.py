@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import time
 from pathlib import Path
 
@@ -37,8 +36,7 @@ def run(args: argparse.Namespace) -> int:
 
     from lfstream.cli._common import interrupt_after
     from lfstream.io import FrameWriter, write_lf
-    from lfstream.io._fs import temp_sibling
-    from lfstream.io.writers import truncate_npy
+    from lfstream.io.writers import NpyWriter
     from lfstream.synth import SynthConfig, iter_clip, render_clip
 
     cfg = SynthConfig(frames=args.frames, views=args.views, size=tuple(args.size), seed=args.seed, layers=args.layers,
@@ -58,19 +56,17 @@ def run(args: argparse.Namespace) -> int:
         # frame by frame: a video, a .npy or a folder as each frame is rendered, and the
         # disparity into a memory-mapped .npy, so a long clip never sits in memory
         disp_path = check_new_file(out.with_name(out.stem + "_disparity.npy"), args.overwrite)
-        n, (h, w), done = cfg.views, cfg.size, 0
+        done = 0
         writer = FrameWriter(out, cfg.frames, fps=args.fps, overwrite=args.overwrite)
-        disp_tmp = temp_sibling(disp_path)
+        disparity = NpyWriter(disp_path, cfg.frames)
         try:
-            disparity = np.lib.format.open_memmap(disp_tmp, mode="w+", dtype=np.float32,
-                                                  shape=(cfg.frames, n, n, h, w, 1))
             t0 = time.perf_counter()
             try:
-                for t, (lf, disp) in enumerate(iter_clip(cfg)):
+                for lf, disp in iter_clip(cfg):
                     render_s += time.perf_counter() - t0
                     with interrupt_after():  # a frame and its disparity are written together
                         writer.write(lf)
-                        disparity[t, ..., 0] = disp
+                        disparity.write(disp[..., None])
                         lo, hi = min(lo, float(disp.min())), max(hi, float(disp.max()))
                         done += 1
                     t0 = time.perf_counter()
@@ -78,15 +74,11 @@ def run(args: argparse.Namespace) -> int:
                 interrupted = True
                 if not done:
                     raise
-            disparity.flush()
-            del disparity
-            if done < cfg.frames:
-                truncate_npy(disp_tmp, done)
             writer.close(partial=interrupted)
-            os.replace(disp_tmp, disp_path)
+            disparity.close(partial=interrupted)
         except BaseException:
             writer.abort()
-            disp_tmp.unlink(missing_ok=True)
+            disparity.abort()
             raise
         written.append(str(disp_path))
     info = {"output": written, "frames": done, "views": [cfg.views, cfg.views], "size": list(cfg.size),

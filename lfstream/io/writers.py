@@ -69,6 +69,62 @@ def write_lf(
     return path
 
 
+class NpyWriter:
+    """A ``.npy`` of ``count`` frames written one at a time: memory-mapped under a
+    temporary name (allocated at the first frame, with its shape and dtype) and renamed into
+    place when closed, so nothing is held in memory and nothing torn is left. The caller
+    checks that ``path`` may be written (:func:`lfstream.io._fs.check_new_file`)."""
+
+    def __init__(self, path: str | os.PathLike, count: int) -> None:
+        self.path = Path(path)
+        if not (isinstance(count, (int, np.integer)) and count >= 1):
+            raise LFValueError(f"{self.path}: a .npy written frame by frame needs the frame count, got {count!r}")
+        self._count = int(count)
+        self._store = None
+        self._tmp = temp_sibling(self.path)
+        self.frames = 0
+
+    def write(self, frame: np.ndarray) -> None:
+        """Stores the next frame (every frame the first's shape and dtype)."""
+        frame = np.asarray(frame)
+        if self._store is None:
+            try:
+                self._store = np.lib.format.open_memmap(self._tmp, mode="w+", dtype=frame.dtype,
+                                                        shape=(self._count, *frame.shape))
+            except OSError as exc:
+                raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+        if self.frames >= self._count or frame.shape != self._store.shape[1:]:
+            raise LFValueError(f"{self.path}: frame {self.frames} of shape {frame.shape} does not fit "
+                               f"{self._store.shape}")
+        self._store[self.frames] = frame
+        self.frames += 1
+
+    def close(self, partial: bool = False) -> None:
+        """Renames the file into place. It must hold its ``count`` frames, unless
+        ``partial`` (a stream damaged or interrupted part way): then it is cut to the frames
+        written so far (none: nothing is kept)."""
+        if self._store is None:
+            return
+        store, self._store = self._store, None
+        store.flush()
+        del store
+        if self.frames != self._count and not (partial and self.frames):
+            self._tmp.unlink(missing_ok=True)
+            raise LFValueError(f"{self.path}: {self.frames} of {self._count} frames written; nothing kept")
+        try:
+            if self.frames != self._count:
+                _truncate_npy(self._tmp, self.frames)
+            os.replace(self._tmp, self.path)
+        except OSError as exc:
+            self._tmp.unlink(missing_ok=True)
+            raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+
+    def abort(self) -> None:
+        """Discards what was written."""
+        self._store = None
+        self._tmp.unlink(missing_ok=True)
+
+
 class FrameWriter:
     """Writes an LF video frame by frame to what :func:`write_lf` writes whole, holding one
     frame at a time: a mosaic video (the file appears when closed), a ``.npy`` of ``count``
@@ -92,12 +148,11 @@ class FrameWriter:
         if self._ext == ".npz" or self._ext in IMAGE_EXTS or self._ext in (".pfm", ".lfs"):
             raise LFValueError(f"{self.path}: cannot write a light field frame by frame as {self._ext}; use .npy, "
                                "a video or a folder")
-        if self._ext == ".npy" and not (isinstance(count, (int, np.integer)) and count >= 1):
-            raise LFValueError(f"{self.path}: a .npy written frame by frame needs the frame count, got {count!r}")
+        self._npy = NpyWriter(self.path, count) if self._ext == ".npy" else None
         if self.path.exists() and (self.path.is_file() or any(self.path.iterdir())):
             check_new_file(self.path, overwrite)
-        self._count, self._fps, self._lossless, self._image_ext = count, fps, lossless, image_ext
-        self._video = self._store = self._tmp = None
+        self._fps, self._lossless, self._image_ext = fps, lossless, image_ext
+        self._video = None
         self._made_folder = False
         self.frames = 0
 
@@ -111,18 +166,8 @@ class FrameWriter:
             if self._video is None:
                 self._video = VideoWriter(self.path, self._fps, self._lossless, metadata=grid_metadata(lf.shape[:2]))
             self._video.write(to_mosaic(lf))
-        elif self._ext == ".npy":
-            if self._store is None:
-                self._tmp = temp_sibling(self.path)
-                try:
-                    self._store = np.lib.format.open_memmap(self._tmp, mode="w+", dtype=np.uint8,
-                                                            shape=(self._count, *lf.shape))
-                except OSError as exc:
-                    raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
-            if self.frames >= self._count or lf.shape != self._store.shape[1:]:
-                raise LFValueError(f"{self.path}: frame {self.frames} of shape {lf.shape} does not fit "
-                                   f"{self._store.shape}")
-            self._store[self.frames] = lf
+        elif self._npy is not None:
+            self._npy.write(lf)
         else:
             if not self.path.exists():
                 self.path.mkdir(parents=True)
@@ -136,29 +181,16 @@ class FrameWriter:
         written so far (no frame at all: nothing is kept)."""
         if self._video is not None:
             self._video.close()
-        if self._store is not None:
-            store, self._store = self._store, None
-            store.flush()
-            del store
-            if self.frames != self._count and not (partial and self.frames):
-                self._tmp.unlink(missing_ok=True)
-                raise LFValueError(f"{self.path}: {self.frames} of {self._count} frames written; nothing kept")
-            try:
-                if self.frames != self._count:
-                    truncate_npy(self._tmp, self.frames)
-                os.replace(self._tmp, self.path)
-            except OSError as exc:
-                self._tmp.unlink(missing_ok=True)
-                raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+        if self._npy is not None:
+            self._npy.close(partial)
 
     def abort(self) -> None:
         """Discards what was written (a folder keeps its complete frames; one this writer
         made and wrote nothing to is removed)."""
         if self._video is not None:
             self._video.abort()
-        if self._store is not None:
-            self._store = None
-            self._tmp.unlink(missing_ok=True)
+        if self._npy is not None:
+            self._npy.abort()
         if self._made_folder and self.path.is_dir() and not any(self.path.iterdir()):
             self.path.rmdir()
 
@@ -174,7 +206,7 @@ class FrameWriter:
             self.abort()
 
 
-def truncate_npy(path: Path, frames: int) -> None:
+def _truncate_npy(path: Path, frames: int) -> None:
     """Cuts a ``.npy`` of ``(count, ...)`` down to its first ``frames`` along axis 0: the
     header's shape rewritten in place (padded to the header's length, as the format allows)
     and the data after them dropped."""
@@ -205,4 +237,4 @@ def _npy_bytes(arr: np.ndarray) -> bytes:
     return bio.getvalue()
 
 
-__all__ = ["write_lf", "FrameWriter", "truncate_npy"]
+__all__ = ["write_lf", "FrameWriter", "NpyWriter"]
