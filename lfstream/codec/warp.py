@@ -216,6 +216,7 @@ def warp_views(
     gains: np.ndarray | None = None,
     axes: np.ndarray | None = None,
     beside: Future | None = None,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """Synthesises a light field from its centre view and the centre view's disparity.
 
@@ -236,6 +237,8 @@ def warp_views(
         beside: work running on another thread meanwhile (the decoder's residual layer):
             until it is done the views are warped on this thread alone, a few at a time,
             the rest then on every thread (:data:`BESIDE_CHUNK_VIEWS`); the same pixels.
+        out: where to write the views (``(U, V, H, W, C)`` uint8, C-contiguous; returned):
+            a frame of a caller's video array, which then needs no copy; ``None``: a new array.
 
     Shape:
         - output: ``(U, V, H, W, C)`` uint8
@@ -249,15 +252,27 @@ def warp_views(
     offsets = view_offsets((u, v), axes)
     src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
     gains = _check_gains(gains, (u, v), c)
+    _check_out(out, (u, v, h, w, c))
     if not np.any(d):  # every view is the centre view: copies, then OpenCV's gain multiply
         flat = np.ascontiguousarray(np.broadcast_to(src, (u, v, h, w, c)))
-        if gains is None:
-            return flat
-        from lfstream.codec.shading import apply_gains
+        if gains is not None:
+            from lfstream.codec.shading import apply_gains
 
-        return apply_gains(flat, gains)
+            flat = apply_gains(flat, gains)
+        if out is None:
+            return flat
+        out[...] = flat
+        return out
     d = np.ascontiguousarray(d)
-    return _warp_kernel(src, d, None, offsets, *_occlusion_plan(d, offsets, occlusion), gains, beside)
+    return _warp_kernel(src, d, None, offsets, *_occlusion_plan(d, offsets, occlusion), gains, beside, out)
+
+
+def _check_out(out: np.ndarray | None, shape: tuple[int, ...]) -> None:
+    """Refuses an output array the kernel cannot write in place."""
+    if out is not None and (not isinstance(out, np.ndarray) or out.shape != shape or out.dtype != np.uint8
+                            or not out.flags.c_contiguous or not out.flags.writeable):
+        got = f"{out.shape} {out.dtype}" if isinstance(out, np.ndarray) else type(out).__name__
+        raise LFValueError(f"out: a writeable C-contiguous uint8 array of shape {shape}, got {got}")
 
 
 def warp_views_at(centre: np.ndarray, disparity: np.ndarray, views: tuple[int, int], keys: list[tuple[int, int]],
@@ -389,11 +404,11 @@ BESIDE_CHUNK_VIEWS = 4
 
 def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, offsets: np.ndarray,
                  splat: np.ndarray, reach: np.ndarray, gains: np.ndarray | None,
-                 beside: Future | None = None) -> np.ndarray:
+                 beside: Future | None = None, out: np.ndarray | None = None) -> np.ndarray:
     """Runs the fused warp (:func:`lfstream.codec._kernels.warp_all_views`) over every
     channel triple of ``src`` (H, W, C) uint8; ``splat``: (U, V, H) bool, the view rows
     splatted (:func:`splat_rows`), ``reach``: (U, V) int64 (:func:`splat_reach`);
-    ``beside``: :func:`warp_views`'s."""
+    ``beside`` and ``out`` (checked by the caller): :func:`warp_views`'s."""
     import numba
 
     from lfstream.codec._kernels import _LANES, pack_lanes, warp_all_views
@@ -412,7 +427,8 @@ def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, o
     share = splat.mean(axis=-1)
     threads = numba.get_num_threads()
     order, starts = deal_views(offsets, share, threads)
-    out = np.empty((u, v, h, w * c), np.uint8)
+    result = np.empty((u, v, h, w, c), np.uint8) if out is None else out
+    out = result.reshape(u, v, h, w * c)  # the rows the kernel writes (a view)
     packed = np.empty((h + 2) * (w + 2), np.uint64)  # with a one-pixel border (pack_lanes)
     src, d, view_disp = read_only(src), read_only(d), read_only(view_disp)  # one signature (read_only)
     for ch0 in range(0, c, _LANES):  # three channels per pass, in the lanes of one uint64
@@ -429,7 +445,7 @@ def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, o
             order, starts = deal_views(offsets, share, threads, ranked[_warp_beside(beside, ranked, warp):])
         if len(order):
             warp(order, starts)
-    return out.reshape(u, v, h, w, c)
+    return result
 
 
 def _warp_beside(beside: Future, ranked: np.ndarray, warp) -> int:

@@ -77,6 +77,40 @@ def test_truncated_stream_yields_complete_frames(stream, clip):
     assert info.value.partial.shape == (3,) + clip.shape[1:]
 
 
+def test_decode_fills_one_array_with_the_frames_it_gives_apart(stream, monkeypatch):
+    """``decode`` writes each frame into one video array (no stack of separate frames):
+    the same bytes as the frames decoded one by one, the frames contiguous in one buffer;
+    where the counted frames would take too much memory it decodes them apart and stacks
+    them, with the same bytes."""
+    from lfstream.codec import decoder as decoder_module
+
+    apart = np.stack([f.lf for f in decoder_module.iter_decode(io.BytesIO(stream))])
+    whole = decode(stream)
+    np.testing.assert_array_equal(whole, apart)
+    assert whole.flags.c_contiguous and whole.base is not None  # the counted array itself, not a stack
+    stacked = []
+    monkeypatch.setattr(decoder_module, "stack_frames", lambda frames: stacked.append(len(frames)) or np.stack(frames))
+    decode(stream)
+    assert stacked == []
+    monkeypatch.setattr(decoder_module, "VIDEO_ARRAY_MEMORY_SHARE", 0.0)
+    np.testing.assert_array_equal(decode(stream), apart)
+    assert stacked == [len(apart)]
+
+
+def test_a_damaged_packet_after_the_count_leaves_the_frames_before_it(stream, clip):
+    """A packet whose checksum holds but whose picture does not decode: counted, then the
+    decode stops there; the frames before it are the partial result."""
+    from lfstream.codec.bitstream import pack_packet
+
+    header, packets = split_stream(stream)
+    bad = Packet(seq=2, timestamp_us=packets[2].timestamp_us, image=b"\xff\xd8 not a jpeg", hint=packets[2].hint,
+                 gain=packets[2].gain, meta=packets[2].meta)
+    data = pack_header(header) + b"".join(pack_packet(p, header.version) for p in [*packets[:2], bad, packets[3]])
+    with pytest.raises(LFStreamError) as info:
+        decode(data)
+    np.testing.assert_array_equal(info.value.partial, decode(stream)[:2])
+
+
 def test_hostile_lengths_fail_before_allocating(stream):
     header_len = len(pack_header(split_stream(stream)[0]))
     data = bytearray(stream)

@@ -439,3 +439,14 @@ def test_the_warp_leaves_a_long_residual_decode_a_core(coded, monkeypatch):
         outs.append(Decoder(header).decode_packet(packets[0]).lf)
     assert seen == [True, False]
     np.testing.assert_array_equal(outs[0], outs[1])
+
+
+def test_a_residual_stream_decodes_into_the_video_array_as_frame_by_frame(coded):
+    """``decode`` writes each frame's prediction into its video array and adds the residual
+    there: the same bytes as the frames decoded one by one."""
+    import io
+
+    from lfstream.codec.decoder import iter_decode
+
+    apart = [f.lf for f in iter_decode(io.BytesIO(coded))]
+    np.testing.assert_array_equal(decode(coded), np.stack(apart))

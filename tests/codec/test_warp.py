@@ -126,6 +126,24 @@ def test_fused_warp_applies_gains_like_resize_and_multiply(rng):
         warp_views(centre, disp, (3, 3), gains=np.ones((2, 3, 2, 2, 3), np.float32))
 
 
+def test_warp_into_a_given_array(rng):
+    """``out`` receives the views (and is returned), the same bytes as a new array, on the
+    kernel's path and on the flat one; an array the kernel cannot fill is refused."""
+    centre, disp = _scene(seed=9, size=(30, 36))
+    gains = rng.uniform(0.8, 1.2, (3, 5, 2, 2, 3)).astype(np.float32)
+    video = np.zeros((2, 3, 5, 30, 36, 3), np.uint8)
+    for d in (disp, np.zeros_like(disp)):
+        for g in (None, gains):
+            got = warp_views(centre, d, (3, 5), gains=g, out=video[1])
+            assert got is video[1] or np.shares_memory(got, video)
+            np.testing.assert_array_equal(video[1], warp_views(centre, d, (3, 5), gains=g))
+    assert not video[0].any()
+    for bad in (np.zeros((3, 5, 30, 36, 3), np.float32), np.zeros((3, 5, 30, 36, 4), np.uint8),
+                np.zeros((3, 5, 36, 30, 3), np.uint8).transpose(0, 1, 3, 2, 4), [[0]]):
+        with pytest.raises(LFValueError, match="out"):
+            warp_views(centre, disp, (3, 5), out=bad)
+
+
 @pytest.mark.parametrize("channels", [1, 4])
 def test_fused_warp_any_channel_count(channels, rng):
     centre, disp = _scene(seed=11, size=(24, 20))
