@@ -286,10 +286,11 @@ def upsample_gain(gain: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return cv2.resize(np.asarray(gain, np.float32), (w, h), interpolation=cv2.INTER_LINEAR).reshape(h, w, -1)
 
 
-def apply_gains(lf: np.ndarray, gains: np.ndarray) -> np.ndarray:
-    """Multiplies each uint8 view ``(U, V, H, W, 3)`` by its upsampled gain map (a new array)."""
+def apply_gains(lf: np.ndarray, gains: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Multiplies each uint8 view ``(U, V, H, W, 3)`` by its upsampled gain map, into ``out``
+    (a new array where ``None``; ``lf`` may be a broadcast of one view: each view is read once)."""
     u, v, h, w, c = lf.shape
-    out = np.empty_like(lf)
+    out = np.empty((u, v, h, w, c), np.uint8) if out is None else out
     for a in range(u):
         for b in range(v):
             g = gains[a, b]

@@ -253,16 +253,14 @@ def warp_views(
     src = np.ascontiguousarray(to_uint8(np.asarray(centre)))
     gains = _check_gains(gains, (u, v), c)
     _check_out(out, (u, v, h, w, c))
-    if not np.any(d):  # every view is the centre view: copies, then OpenCV's gain multiply
-        flat = np.ascontiguousarray(np.broadcast_to(src, (u, v, h, w, c)))
-        if gains is not None:
-            from lfstream.codec.shading import apply_gains
+    if not np.any(d):  # every view is the centre view: copies, or OpenCV's gain multiply of it
+        result = np.empty((u, v, h, w, c), np.uint8) if out is None else out
+        if gains is None:
+            result[...] = src
+            return result
+        from lfstream.codec.shading import apply_gains
 
-            flat = apply_gains(flat, gains)
-        if out is None:
-            return flat
-        out[...] = flat
-        return out
+        return apply_gains(np.broadcast_to(src, (u, v, h, w, c)), gains, out=result)
     d = np.ascontiguousarray(d)
     return _warp_kernel(src, d, None, offsets, *_occlusion_plan(d, offsets, occlusion), gains, beside, out)
 
