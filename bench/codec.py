@@ -9,7 +9,13 @@ depth-of-field image's PSNR/SSIM, near/far refocused images' PSNR/SSIM (seed: al
 and 1.5), and encode/decode times measured here by the harness (median of --runs). All
 metrics on the 8-bit reconstructions.
 
-    python bench/codec.py [--json [FILE]] [--runs N] [--quick]
+    python bench/codec.py [--json [FILE]] [--runs N] [--quick] [--scenes a,b] [--rounds R]
+
+``--rounds R`` also times the speed ratios interleaved: R rounds, each timing lfstream's default
+and then x265 medium and ultrafast (their matched streams; encode and decode, the median of
+three calls each), so that the host's slow spells fall on both sides of every ratio; it
+reports the median of the R per-round ratios and their range. (The table's times come from
+blocks of runs one method after another, minutes apart on a shared host.)
 
 Rate-distortion curves over the whole range, every preset and Bjontegaard deltas: bench/rd.py.
 """
@@ -17,6 +23,7 @@ Rate-distortion curves over the whole range, every preset and Bjontegaard deltas
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 from _harness import emit, parser, timeit
@@ -42,7 +49,51 @@ def quality(ref: np.ndarray, rec: np.ndarray) -> dict:
     }
 
 
-def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = None) -> list[dict]:
+def _median_time(fn, calls: int = 3) -> float:
+    ts = []
+    for _ in range(calls):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+
+def interleaved_speed(lf: np.ndarray, present: np.ndarray | None, baselines: list[dict], rounds: int) -> dict:
+    """The speed ratios with every round timing lfstream's default and then each baseline's
+    matched stream (encode and decode, the median of three calls each): the median of the
+    per-round ratios and their range (``--rounds``)."""
+    data = lfstream.encode(lf, quality=50, present=present)
+    jobs = {"lfstream": (lambda: lfstream.encode(lf, quality=50, present=present), lambda: lfstream.decode(data))}
+    for b in baselines:
+        codec, preset = ("hevc", "medium") if b["method"].startswith("x265 medium") else ("hevc", "ultrafast")
+        res = b["_result"]
+        jobs[b["method"].split(" @")[0]] = (
+            lambda res=res, codec=codec, preset=preset: encode_views(lf, codec, res.quality,
+                                                                      constant_qp=res.constant_qp, preset=preset),
+            lambda res=res, codec=codec: decode_views(res.data, codec, lf.shape[:2], lf.shape[2:4]))
+    for enc, dec in jobs.values():  # warm-up
+        enc()
+        dec()
+    times = {name: {"encode": [], "decode": []} for name in jobs}
+    for _ in range(rounds):
+        for name, (enc, dec) in jobs.items():
+            times[name]["encode"].append(_median_time(enc))
+            times[name]["decode"].append(_median_time(dec))
+    out = {}
+    for name in jobs:
+        if name == "lfstream":
+            continue
+        key = name.replace(" ", "_")
+        for what in ("encode", "decode"):
+            ratios = np.array(times[name][what]) / np.array(times["lfstream"][what])
+            out[f"{what}_vs_{key}"] = {"median": float(np.median(ratios)), "min": float(ratios.min()),
+                                      "max": float(ratios.max()), "rounds": rounds}
+    print(f"  interleaved (median of {rounds} rounds, range): "
+          + ", ".join(f"{k} {v['median']:.2f}x ({v['min']:.2f}-{v['max']:.2f})" for k, v in out.items()))
+    return out
+
+
+def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = None, rounds: int = 0) -> list[dict]:
     """The default (hint) and flat lfstream at q50, then x265 medium and ultrafast and SVT-AV1
     searched to the default's bpp; each timed here; speed ratios against x265 / HEVC."""
     rows = []
@@ -63,7 +114,7 @@ def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = 
         label = {"medium": "x265 medium", "ultrafast": "x265 ultrafast"}.get(preset, "SVT-AV1")
         rows.append({"lf": name, "method": f"{label} @ default bpp", "quality_param": res.quality,
                      "bytes": res.bytes, "bpp": res.bpp, "encode_s": t_enc["median_s"], "decode_s": t_dec["median_s"],
-                     **quality(lf, rec)})
+                     **quality(lf, rec), "_result": res})
     ours, x265, fast = rows[0], rows[2], rows[3]
     ours["speed"] = {"encode_vs_x265_medium": x265["encode_s"] / ours["encode_s"],
                      "encode_vs_x265_ultrafast": fast["encode_s"] / ours["encode_s"],
@@ -72,17 +123,24 @@ def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = 
         print(f"{name:22s} {r['method']:30s} {r['bpp']:.4f} bpp  MPSNR {r['mpsnr']:6.2f}  MSSIM {r['mssim']:.4f}  "
               f"DoF {r['dof_psnr']:6.2f}  enc {r['encode_s'] * 1e3:8.1f} ms  dec {r['decode_s'] * 1e3:7.1f} ms")
     print("  speed: " + ", ".join(f"{k} {v:.1f}x" for k, v in rows[0]["speed"].items()))
+    if rounds:
+        ours["interleaved_speed"] = interleaved_speed(lf, present, rows[2:4], rounds)
+    for r in rows:
+        r.pop("_result", None)
     return rows
 
 
 def main(argv=None) -> dict:
-    args = parser(__doc__).parse_args(argv)
+    p = parser(__doc__)
+    p.add_argument("--scenes", help="comma-separated scene names (default: all)")
+    p.add_argument("--rounds", type=int, default=0, help="also time the speed ratios interleaved, R rounds")
+    args = p.parse_args(argv)
     runs = 1 if args.quick else args.runs
     # the synthetic clip and every shared sample (rd.py's scenes: HCI stars as their centre 3x3)
-    cases = scenes(args.quick, None)
+    cases = scenes(args.quick, set(args.scenes.split(",")) if args.scenes else None)
     results = []
     for name, lf in cases:
-        results += evaluate(name, lf, runs)
+        results += evaluate(name, lf, runs, rounds=max(0, args.rounds))
     return emit(args, results)
 
 
