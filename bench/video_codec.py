@@ -68,7 +68,7 @@ def evaluate(clip: np.ndarray, runs: int, mssim_every: int) -> list[dict]:
         rec = decode_views(res.data, codec, pseudo.shape[:2], pseudo.shape[2:4]).reshape(clip.shape)
         e = timeit(lambda: encode_views(pseudo, codec, res.quality, constant_qp=res.constant_qp, preset=preset),
                    runs=1, warmup=0)
-        d = timeit(lambda: decode_views(res.data, codec, pseudo.shape[:2], pseudo.shape[2:4]), runs=max(1, runs // 2))
+        d = timeit(lambda: decode_views(res.data, codec, pseudo.shape[:2], pseudo.shape[2:4]), runs=runs)
         rows.append({"clip": label, "method": name, "quality_param": res.quality, "bytes": res.bytes, "bpp": res.bpp,
                      "encode_ms_per_frame": e["median_s"] * 1e3 / t, "decode_ms_per_frame": d["median_s"] * 1e3 / t,
                      **clip_quality(clip, rec, mssim_every)})
