@@ -220,6 +220,16 @@ def _row_taps(d_row, cols, y, du, dv, h, idx, fxs, fys):  # pragma: no cover - c
         idx[x] = y0 * (w + 2) + x0
 
 
+@numba.njit(fastmath=True, cache=True, nogil=True, inline="always")
+def _gather_pair(packed, idx, offset, first, second):  # pragma: no cover - compiled
+    """``first[x] = packed[idx[x]]``, ``second[x] = packed[idx[x] + offset]``: a row's two taps,
+    loads alone (:func:`_row_accs`)."""
+    for x in range(idx.shape[0]):
+        i = np.uint32(idx[x])
+        first[x] = packed[i]
+        second[x] = packed[i + offset]
+
+
 @numba.njit(**_ROW)
 def _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs):  # pragma: no cover - compiled
     """Bilinear interpolation of the packed lanes for one view row: ``accs[x]`` (each lane
@@ -243,18 +253,12 @@ def _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs):  # pragma: n
     ta, tb, tc, td = gathered[0], gathered[1], gathered[2], gathered[3]
     one = np.uint32(1)
     if taps == _TAPS_ROW:
-        for x in range(w):
-            i = np.uint32(idx[x])
-            ta[x] = packed[i]
-            tb[x] = packed[i + one]
+        _gather_pair(packed, idx, one, ta, tb)
         for x in range(w):
             accs[x] = f * _lerp_lanes(ta[x], tb[x], np.uint64(fxs[x]))
         return
     if taps == _TAPS_COLUMN:
-        for x in range(w):
-            i = np.uint32(idx[x])
-            ta[x] = packed[i]
-            tc[x] = packed[i + stride]
+        _gather_pair(packed, idx, stride, ta, tc)
         for x in range(w):
             fy = np.uint64(fys[x])
             accs[x] = (f - fy) * _lerp_lanes(ta[x], ta[x], zero) + fy * _lerp_lanes(tc[x], tc[x], zero)
