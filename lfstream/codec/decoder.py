@@ -488,9 +488,10 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
 VIDEO_ARRAY_MEMORY_SHARE = 0.5
 
 
-def _video_array(fh, limits: Limits) -> np.ndarray | None:
+def _video_array(fh, limits: Limits, max_frames: int | None = None) -> np.ndarray | None:
     """The ``(T, U, V, H, W, 3)`` array for the complete packets of the stream in ``fh``
-    (counted, checksums and all, up to the first damaged one), or ``None`` where there are
+    (counted, checksums and all, up to the first damaged one; at most ``max_frames``), or
+    ``None`` where there are
     none, the header is damaged (the decode names it), or they would take more than
     :data:`VIDEO_ARRAY_MEMORY_SHARE` of the machine's memory: a stream cannot make the
     decoder reserve memory its frames could not fill."""
@@ -499,6 +500,8 @@ def _video_array(fh, limits: Limits) -> np.ndarray | None:
         count, _ = count_packets(fh, header, limits)
     except BitstreamError:
         return None
+    if max_frames is not None:
+        count = min(count, max(0, int(max_frames)))
     u, v = header.views
     h, w = header.size
     frame_bytes = u * v * h * w * 3
@@ -528,14 +531,17 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
         with open(path, "rb") as fh:
             header = read_header(fh)
             fh.seek(0)
-            frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device)]
+            out = _video_array(fh, Limits(), max_frames)
+            fh.seek(0)
+            frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device,
+                                                out=out)]
     except OSError as exc:
         raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
     except BitstreamError as exc:
         raise BitstreamError(f"{path}: {exc}") from exc
     if not frames:
         raise BitstreamError(f"{path}: stream holds no frames")
-    return stack_frames(frames), header.fps
+    return _stacked(frames, out), header.fps
 
 
 def lfs_frames(path: str | os.PathLike, max_frames: int | None = None

@@ -97,6 +97,23 @@ def test_decode_fills_one_array_with_the_frames_it_gives_apart(stream, monkeypat
     assert stacked == [len(apart)]
 
 
+def test_decode_file_is_decode_of_its_bytes(stream, tmp_path):
+    """``decode_file`` gives ``decode``'s frames and the stream's frame rate, at most
+    ``max_frames`` of them, and names the file where the stream is damaged."""
+    from lfstream.codec import decode_file
+
+    path = tmp_path / "clip.lfs"
+    path.write_bytes(stream)
+    lf, fps = decode_file(path)
+    np.testing.assert_array_equal(lf, decode(stream))
+    assert fps == split_stream(stream)[0].fps
+    np.testing.assert_array_equal(decode_file(path, max_frames=2)[0], lf[:2])
+    cut = tmp_path / "cut.lfs"
+    cut.write_bytes(stream[:-7])
+    with pytest.raises(BitstreamError, match="cut.lfs"):
+        decode_file(cut)
+
+
 def test_a_damaged_packet_after_the_count_leaves_the_frames_before_it(stream, clip):
     """A packet whose checksum holds but whose picture does not decode: counted, then the
     decode stops there; the frames before it are the partial result."""
