@@ -32,8 +32,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.codec.bitstream import count_packets, read_header
-    from lfstream.codec.decoder import iter_decode, stack_frames
+    from lfstream.codec.bitstream import Limits, count_packets, read_header
+    from lfstream.codec.decoder import _stacked, _video_array, iter_decode
     from lfstream.errors import BitstreamError, LFFileError
     from lfstream.io import FrameWriter, write_lf, write_pfm
     from lfstream.io._fs import check_new_file
@@ -43,9 +43,10 @@ def run(args: argparse.Namespace) -> int:
         args.disparity_out.mkdir(parents=True, exist_ok=True)
     # a video, a folder or a .npy is written frame by frame as the frames are decoded (one
     # frame in memory; a video at the stream's frame rate; a .npy sized by the packets
-    # counted first); a .npz takes them together at the end (its members are compressed whole)
+    # counted first); a .npz takes them together at the end (its members are compressed
+    # whole), decoded into one array sized by the packets counted first (not stacked after)
     by_frame = args.output.suffix.lower() != ".npz"
-    frames, count, writer, error, write_s, expected = [], 0, None, None, 0.0, None
+    frames, count, writer, error, write_s, expected, video = [], 0, None, None, 0.0, None, None
     t0 = time.perf_counter()
     try:
         with open(args.input, "rb") as fh:
@@ -53,10 +54,13 @@ def run(args: argparse.Namespace) -> int:
             fps = header.fps
             if args.output.suffix.lower() == ".npy":
                 expected = count_packets(fh, header)[0]  # the frames up to any damage
+            elif not by_frame:
+                fh.seek(0)
+                video = _video_array(fh, Limits())
             fh.seek(0)
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
-                                 device=args.device, batch=args.batch, deblock=not args.no_deblock):
+                                 device=args.device, batch=args.batch, deblock=not args.no_deblock, out=video):
                 with interrupt_after():  # a frame's outputs are written whole
                     if by_frame:
                         t_write = time.perf_counter()
@@ -88,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     if writer is not None:
         writer.close(partial=error is not None)
     elif frames:
-        write_lf(args.output, stack_frames(frames), overwrite=args.overwrite)
+        write_lf(args.output, _stacked(frames, video), overwrite=args.overwrite)
     if error is not None:
         done = (f"{count} complete frame(s) before it written to {args.output}" if count
                 else "no complete frame, nothing written")

@@ -125,6 +125,12 @@ def test_cli_decodes_to_a_video_frame_by_frame_at_the_streams_rate(tmp_path, cap
     assert main(["decode", str(tmp_path / "cut.lfs"), "-o", str(tmp_path / "cut.mp4")]) == 2
     assert "frame 2" in capsys.readouterr().err
     np.testing.assert_array_equal(load_lf(tmp_path / "cut.mp4").lf, video.lf[:2])
+    # a .npz takes the frames together (decoded into one array): the same frames, and the
+    # complete frames of a damaged stream
+    assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "a.npz")]) == 0
+    np.testing.assert_array_equal(load_lf(tmp_path / "a.npz").lf, video.lf)
+    assert main(["decode", str(tmp_path / "cut.lfs"), "-o", str(tmp_path / "cut.npz")]) == 2
+    np.testing.assert_array_equal(load_lf(tmp_path / "cut.npz").lf, video.lf[:2])
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary file left
 
 
