@@ -32,7 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.codec.bitstream import Limits, count_packets, read_header
+    from lfstream.codec.bitstream import count_packets, read_header
     from lfstream.codec.decoder import _stacked, _video_array, iter_decode
     from lfstream.errors import BitstreamError, LFFileError
     from lfstream.io import FrameWriter, write_lf, write_pfm
@@ -52,11 +52,9 @@ def run(args: argparse.Namespace) -> int:
         with open(args.input, "rb") as fh:
             header = read_header(fh)
             fps = header.fps
-            if args.output.suffix.lower() == ".npy":
+            if args.output.suffix.lower() in (".npy", ".npz"):
                 expected = count_packets(fh, header)[0]  # the frames up to any damage
-            elif not by_frame:
-                fh.seek(0)
-                video = _video_array(fh, Limits())
+                video = None if by_frame else _video_array(header, expected)
             fh.seek(0)
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,

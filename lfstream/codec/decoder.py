@@ -469,7 +469,11 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise LFValueError(f"data: expected bytes, got {type(data).__name__}")
     buf = io.BytesIO(bytes(data))
-    out = _video_array(buf, limits)
+    try:
+        header = read_header(buf, limits)
+        out = _video_array(header, count_packets(buf, header, limits)[0])
+    except BitstreamError:  # a damaged header: the decode below names it
+        out = None
     buf.seek(0)
     frames: list[np.ndarray] = []
     try:
@@ -488,18 +492,12 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
 VIDEO_ARRAY_MEMORY_SHARE = 0.5
 
 
-def _video_array(fh, limits: Limits, max_frames: int | None = None) -> np.ndarray | None:
-    """The ``(T, U, V, H, W, 3)`` array for the complete packets of the stream in ``fh``
-    (counted, checksums and all, up to the first damaged one; at most ``max_frames``), or
-    ``None`` where there are
-    none, the header is damaged (the decode names it), or they would take more than
+def _video_array(header: StreamHeader, count: int, max_frames: int | None = None) -> np.ndarray | None:
+    """The ``(T, U, V, H, W, 3)`` array for the ``count`` complete packets of a stream with
+    ``header`` (:func:`lfstream.codec.bitstream.count_packets`; at most ``max_frames``), or
+    ``None`` where there are none or they would take more than
     :data:`VIDEO_ARRAY_MEMORY_SHARE` of the machine's memory: a stream cannot make the
     decoder reserve memory its frames could not fill."""
-    try:
-        header = read_header(fh, limits)
-        count, _ = count_packets(fh, header, limits)
-    except BitstreamError:
-        return None
     if max_frames is not None:
         count = min(count, max(0, int(max_frames)))
     u, v = header.views
@@ -530,8 +528,7 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
     try:
         with open(path, "rb") as fh:
             header = read_header(fh)
-            fh.seek(0)
-            out = _video_array(fh, Limits(), max_frames)
+            out = _video_array(header, count_packets(fh, header)[0], max_frames)
             fh.seek(0)
             frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device,
                                                 out=out)]
