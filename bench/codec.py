@@ -23,7 +23,6 @@ Rate-distortion curves over the whole range, every preset and Bjontegaard deltas
 from __future__ import annotations
 
 import os
-import time
 
 import numpy as np
 from _harness import emit, parser, timeit
@@ -49,15 +48,6 @@ def quality(ref: np.ndarray, rec: np.ndarray) -> dict:
     }
 
 
-def _median_time(fn, calls: int = 3) -> float:
-    ts = []
-    for _ in range(calls):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
-
-
 def interleaved_speed(lf: np.ndarray, present: np.ndarray | None, baselines: list[dict], rounds: int) -> dict:
     """The speed ratios with every round timing lfstream's default and then each baseline's
     matched stream (encode and decode, the median of three calls each): the median of the
@@ -65,8 +55,7 @@ def interleaved_speed(lf: np.ndarray, present: np.ndarray | None, baselines: lis
     data = lfstream.encode(lf, quality=50, present=present)
     jobs = {"lfstream": (lambda: lfstream.encode(lf, quality=50, present=present), lambda: lfstream.decode(data))}
     for b in baselines:
-        codec, preset = ("hevc", "medium") if b["method"].startswith("x265 medium") else ("hevc", "ultrafast")
-        res = b["_result"]
+        codec, preset, res = b["_baseline"]
         jobs[b["method"].split(" @")[0]] = (
             lambda res=res, codec=codec, preset=preset: encode_views(lf, codec, res.quality,
                                                                       constant_qp=res.constant_qp, preset=preset),
@@ -77,8 +66,8 @@ def interleaved_speed(lf: np.ndarray, present: np.ndarray | None, baselines: lis
     times = {name: {"encode": [], "decode": []} for name in jobs}
     for _ in range(rounds):
         for name, (enc, dec) in jobs.items():
-            times[name]["encode"].append(_median_time(enc))
-            times[name]["decode"].append(_median_time(dec))
+            times[name]["encode"].append(timeit(enc, runs=3, warmup=0)["median_s"])
+            times[name]["decode"].append(timeit(dec, runs=3, warmup=0)["median_s"])
     out = {}
     for name in jobs:
         if name == "lfstream":
@@ -114,7 +103,7 @@ def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = 
         label = {"medium": "x265 medium", "ultrafast": "x265 ultrafast"}.get(preset, "SVT-AV1")
         rows.append({"lf": name, "method": f"{label} @ default bpp", "quality_param": res.quality,
                      "bytes": res.bytes, "bpp": res.bpp, "encode_s": t_enc["median_s"], "decode_s": t_dec["median_s"],
-                     **quality(lf, rec), "_result": res})
+                     **quality(lf, rec), "_baseline": (codec, preset, res)})
     ours, x265, fast = rows[0], rows[2], rows[3]
     ours["speed"] = {"encode_vs_x265_medium": x265["encode_s"] / ours["encode_s"],
                      "encode_vs_x265_ultrafast": fast["encode_s"] / ours["encode_s"],
@@ -126,7 +115,7 @@ def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = 
     if rounds:
         ours["interleaved_speed"] = interleaved_speed(lf, present, rows[2:4], rounds)
     for r in rows:
-        r.pop("_result", None)
+        r.pop("_baseline", None)
     return rows
 
 
