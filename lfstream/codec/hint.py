@@ -559,8 +559,8 @@ def _sweeps(grids: np.ndarray, high_passed: np.ndarray | None, keys: list[tuple[
             lo, hi = scene_range(coarse[textured] if textured.mean() > 0.05 else coarse, margin=0.5 * cs / reach)
             search = (max(lo, -options.search_limit), min(hi, options.search_limit))
     lo, hi = search
-    if not hi > lo:
-        lo, hi = lo - 0.5, hi + 0.5
+    if not hi > lo:  # an empty range (or one the search limit cut off entirely): around it
+        lo, hi = min(lo, hi) - 0.5, max(lo, hi) + 0.5
     images = high_passed if high_passed is not None else _high_pass(grids)
     return lo, hi, _sweep(images, offsets, lo, hi, work, options, device=device), grid_offsets
 
@@ -801,7 +801,11 @@ class HintTracker:
         d = hm.disparity
         lo, hi = float(d.min()), float(d.max())
         pad = 0.1 * (hi - lo) + 0.05
-        return quantise(hm, (max(lo - pad, hm.search[0]), min(hi + pad, hm.search[1])), self.options.precision)
+        # the headroom stays within the range swept, but the grid always covers the map: the
+        # sweep's last candidate and its sub-pixel step can lie past the range's end, and a
+        # map entirely past it (a tiny, noisy frame) gave an inverted range the decoder refused
+        return quantise(hm, (min(max(lo - pad, hm.search[0]), lo), max(min(hi + pad, hm.search[1]), hi)),
+                        self.options.precision)
 
     def coarser_key_hint(self) -> QuantisedHint | None:
         """The last frame's key hint as it would be sent at twice the scale, from the same

@@ -522,3 +522,24 @@ def test_corrupt_or_truncated_context_coded_maps_are_bitstream_errors(rng):
     old = bytearray(_zstd_payload(H.QuantisedHint(q, 0.0, 1.0, 4, None)))
     assert old[0] == H.HINT_VERSION and old[3] == H.CODER_ZSTD
     assert np.array_equal(H._parse(bytes(old), (124, 164), 7, {}).q, q)
+
+
+def test_a_map_past_the_swept_range_still_gets_a_grid_that_covers_it():
+    """A tiny noisy frame whose whole map lies past the end of the range swept (the last
+    candidate and the sub-pixel step reach beyond it: found by the stability test's random
+    search, 3x3x16x16 noise at quality 1) is sent on a grid that covers the map, and the
+    stream decodes; the inverted range the key hint had before was refused by the decoder."""
+    import lfstream
+
+    lf = np.random.default_rng(984).integers(0, 256, (3, 3, 16, 16, 3), dtype=np.uint8)
+    hm = H.estimate_hint_map(lf)
+    assert float(hm.disparity.max()) > hm.search[1]  # the case: the map is past the range's end
+    tracker = H.HintTracker()
+    tracker.encode(lf, 0)
+    qh = tracker.last
+    assert qh.lo < qh.hi and qh.lo <= float(hm.disparity.min()) and float(hm.disparity.max()) <= qh.hi
+    k = H.level_step(qh.hi - qh.lo, hm.reach, H.HintOptions().precision)  # levels between sent values
+    np.testing.assert_allclose(qh.values(), hm.disparity, atol=(k / 2 + 0.01) * (qh.hi - qh.lo) / 255)
+    rec = lfstream.decode(lfstream.encode(lf, quality=1, depth_hint=True))
+    assert rec.shape == (1, *lf.shape) and rec.dtype == np.uint8
+
