@@ -22,6 +22,9 @@ _HOLE_TEST = np.float32(-1.0e38)
 # here: joint_upsample gave different maps from run to run). tests/codec checks the
 # kernels against plain-Python references and across thread counts.
 _ROW = dict(fastmath=True, cache=True, nogil=True)
+# OpenCV's arithmetic reproduced: no fastmath (a fused multiply-add or a reordered sum would
+# round differently from OpenCV's separate float32 multiplies and adds)
+_EXACT = dict(cache=True, nogil=True)
 
 
 # Fixed-point bilinear sampling: positions in 1/1024 pixel (OpenCV 5's remap interpolates
@@ -541,6 +544,67 @@ def splat_all_views(disp, offsets, splat, reach, out):  # pragma: no cover - com
                 _fill_holes(disp[y], dview[y], holes)
             else:
                 dview[y] = disp[y]
+
+
+@numba.njit(**_EXACT)
+def _gain_map_row(gain, r, cols, col_w, n_ch, dst):  # pragma: no cover - compiled
+    """Row ``r`` of one view's gain map ``(gh, gw, Cg)`` resized along x, as OpenCV's
+    INTER_LINEAR horizontal pass computes it (``S[sx] * a0 + S[sx + 1] * a1`` in float32), for
+    ``n_ch`` channels interleaved (a single-channel map repeated)."""
+    cg = gain.shape[2]
+    for x in range(cols.shape[0]):
+        a, b = cols[x, 0], cols[x, 1]
+        w0, w1 = col_w[x, 0], col_w[x, 1]
+        for j in range(n_ch):
+            cc = j if cg > 1 else 0
+            dst[x * n_ch + j] = gain[r, a, cc] * w0 + gain[r, b, cc] * w1
+
+
+@numba.njit(**_EXACT)
+def _gain_apply_row(src_row, top, bottom, b0, b1, dst_row):  # pragma: no cover - compiled
+    """``dst = saturate(rint(src * (top * b0 + bottom * b1)))``: OpenCV's vertical resize
+    pass and its ``multiply`` of uint8 by float32 into uint8 (float32 product, round half to
+    even); contiguous rows, so the loop vectorises."""
+    lo, hi = np.float32(0.0), np.float32(255.0)
+    for j in range(src_row.shape[0]):
+        g = top[j] * b0 + bottom[j] * b1
+        dst_row[j] = np.uint8(min(max(np.rint(np.float32(src_row[j]) * g), lo), hi))
+
+
+@numba.njit(parallel=True, cache=True, nogil=True)
+def apply_view_gains(views, which, gains, active, rows, row_w, cols, col_w, out):  # pragma: no cover - compiled
+    """Each view times its gain map bilinearly up-sampled, rounded to uint8: the bytes of
+    ``cv2.multiply(view, cv2.resize(gain, (W, H), INTER_LINEAR), dtype=CV_8U)`` view by view
+    (:func:`lfstream.codec.shading.apply_gains`), in one parallel pass that writes each
+    output byte once.
+
+    Args:
+        views: (N, H, W * C) uint8, the distinct input views; view ``k`` of the output reads
+            ``views[which[k]]`` (the flat decode: one view for all).
+        which: (U * V,) int64.
+        gains: (U, V, gh, gw, Cg) float32, Cg = 1 or C.
+        active: (U * V,) bool, False where a view's map is 1 everywhere: it is copied.
+        rows, row_w: (H, 2) int64 grid rows per image row and (H, 2) float32 their weights
+            (OpenCV's, :func:`lfstream.codec.shading.resize_taps`); cols, col_w: the same per column.
+        out: (U, V, H, W * C) uint8, overwritten.
+    """
+    n_u, n_v = gains.shape[0], gains.shape[1]
+    h = out.shape[2]
+    gh = gains.shape[2]
+    n_ch = out.shape[3] // cols.shape[0]
+    for k in numba.prange(n_u * n_v):
+        u, v = k // n_v, k % n_v
+        src = views[which[k]]
+        dst = out[u, v]
+        if not active[k]:
+            for y in range(h):
+                dst[y, :] = src[y]
+            continue
+        gcols = np.empty((gh, out.shape[3]), np.float32)
+        for r in range(gh):
+            _gain_map_row(gains[u, v], r, cols, col_w, n_ch, gcols[r])
+        for y in range(h):
+            _gain_apply_row(src[y], gcols[rows[y, 0]], gcols[rows[y, 1]], row_w[y, 0], row_w[y, 1], dst[y])
 
 
 @numba.njit(**_PARALLEL)

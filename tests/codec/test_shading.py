@@ -240,3 +240,59 @@ def test_damaged_coded_key_maps_fail_clearly(shaded_gains):
             assert "frame 3" in str(exc)
             continue
         assert back.shape == shaded_gains[0].shape and np.isfinite(back).all()
+
+
+def reference_apply_gains(lf: np.ndarray, gains: np.ndarray) -> np.ndarray:
+    """apply_gains's definition, view by view in numpy: OpenCV's INTER_LINEAR taps
+    (``resize_taps``), its horizontal then vertical float32 passes, and ``cv2.multiply``'s
+    float32 product rounded half to even and saturated."""
+    from lfstream.codec.shading import resize_taps
+
+    u, v, h, w, c = lf.shape
+    rows, row_w = resize_taps(h, gains.shape[2])
+    cols, col_w = resize_taps(w, gains.shape[3])
+    out = np.empty(lf.shape, np.uint8)
+    for a in range(u):
+        for b in range(v):
+            g = gains[a, b]
+            across = g[:, cols[:, 0]] * col_w[:, 0, None] + g[:, cols[:, 1]] * col_w[:, 1, None]  # (gh, W, Cg)
+            full = across[rows[:, 0]] * row_w[:, 0, None, None] + across[rows[:, 1]] * row_w[:, 1, None, None]
+            full = np.broadcast_to(full, (h, w, c))
+            out[a, b] = np.clip(np.rint(lf[a, b].astype(np.float32) * full), 0, 255).astype(np.uint8)
+    return out
+
+
+@pytest.mark.parametrize("views,size,grid,channels", [
+    ((7, 7), (75, 101), (4, 4), 3),  # ragged: fractional cells
+    ((5, 3), (64, 96), (3, 5), 1),  # a grey map for three channels
+    ((3, 3), (40, 60), (1, 1), 3),  # one cell: a constant gain
+    ((1, 5), (33, 17), (4, 6), 3),  # more map columns than image... almost: steep taps
+])
+def test_apply_gains_equals_its_reference_and_opencv_within_a_level(views, size, grid, channels):
+    """The parallel kernel gives the numpy reference's bytes to the bit, for one view
+    broadcast to all (the flat decode) and for distinct views, with gains that round to ties
+    (multiples of 1/8); views whose map is 1 are copied; OpenCV's own resize and multiply
+    (which may use IPP's CPU-specific code for the resize) agree within one level."""
+    import cv2
+
+    from lfstream.codec.shading import apply_gains, upsample_gain
+
+    rng = np.random.default_rng(sum(size) + channels)
+    (u, v), (h, w) = views, size
+    lf = rng.integers(0, 256, (u, v, h, w, 3), dtype=np.uint8)
+    for ties in (False, True):
+        gains = (1 + 0.8 * (rng.random((u, v, *grid, channels)) - 0.5)).astype(np.float32)
+        if ties:
+            gains = (np.round(gains * 8) / 8).astype(np.float32)
+        gains[u // 2, v // 2] = 1.0
+        for src in (np.broadcast_to(lf[0, 0], lf.shape), lf):
+            want = reference_apply_gains(np.ascontiguousarray(src), gains)
+            got = apply_gains(src, gains)
+            assert got.dtype == np.uint8 and np.array_equal(got, want)
+            assert np.array_equal(got[u // 2, v // 2], src[u // 2, v // 2])
+            opencv = np.stack([np.stack([cv2.multiply(src[a, b], np.broadcast_to(upsample_gain(gains[a, b], (h, w)),
+                                                                                   (h, w, 3)).copy(), dtype=cv2.CV_8U)
+                                         for b in range(v)]) for a in range(u)])
+            assert np.abs(opencv.astype(np.int16) - got).max() <= 1
+    out = np.zeros_like(lf)
+    assert apply_gains(lf, gains, out=out) is out and np.array_equal(out, reference_apply_gains(lf, gains))
