@@ -325,7 +325,10 @@ def apply_gains(lf: np.ndarray, gains: np.ndarray, out: np.ndarray | None = None
     active = ~np.all(np.abs(gains - 1.0) < 1e-6, axis=(2, 3, 4)).reshape(-1)
     rows, row_w = resize_taps(h, gains.shape[2])
     cols, col_w = resize_taps(w, gains.shape[3])
-    apply_view_gains(views, which, gains, active, rows, row_w, cols, col_w, out.reshape(u, v, h, w * c))
+    target = out if out.flags.c_contiguous else np.empty((u, v, h, w, c), np.uint8)  # the kernel writes rows
+    apply_view_gains(views, which, gains, active, rows, row_w, cols, col_w, target.reshape(u, v, h, w * c))
+    if target is not out:
+        out[...] = target
     return out
 
 
