@@ -254,3 +254,37 @@ def test_the_jfif_segment_is_left_out_and_no_pixel_changes(rng):
     marked = with_post_filter(ours, PostFilterChoice(len(POST_FILTERS) - 1, 3))
     assert named_post_filter(marked) == PostFilterChoice(len(POST_FILTERS) - 1, 3)
     assert np.array_equal(decode_jpeg(marked, (48, 72)), decode_jpeg(ours, (48, 72)))
+
+
+def test_wide_post_filters_run_without_ipp_on_this_thread_only_and_give_the_same_bytes():
+    """The 7 x 7 post-filter runs OpenCV's own bilateral code (faster than IPP's here, the
+    same bytes: both are compared on a textured view at the JPEG scales in use); the IPP
+    switch is restored afterwards and never seen by another thread."""
+    import threading
+
+    from lfstream.codec.jpeg import IPP_BILATERAL_MAX_DIAMETER, POST_FILTERS
+
+    rng = np.random.default_rng(3)
+    img = cv2.GaussianBlur(rng.integers(0, 256, (75, 101, 3), dtype=np.uint8), (3, 3), 0)
+    wide = [pf for pf in POST_FILTERS if pf.diameter > IPP_BILATERAL_MAX_DIAMETER]
+    assert wide  # the 7 x 7 filter
+    seen = []
+
+    def watch():
+        seen.append(cv2.ipp.useIPP())
+
+    was = cv2.ipp.useIPP()
+    for pf in wide:
+        for scale in (0.5, 1.0, 2.0, 4.0):
+            got = deblock_jpeg(img, scale, pf)
+            assert cv2.ipp.useIPP() == was
+            thread = threading.Thread(target=watch)
+            thread.start()
+            thread.join()
+            cv2.ipp.setUseIPP(True)
+            try:
+                with_ipp = cv2.bilateralFilter(img, pf.diameter, pf.range_factor * scale, pf.spatial_sigma)
+            finally:
+                cv2.ipp.setUseIPP(was)
+            np.testing.assert_array_equal(got, with_ipp)
+    assert seen and all(s == cv2.ipp.useIPP() for s in seen)
