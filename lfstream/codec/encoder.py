@@ -87,7 +87,7 @@ class Encoder:
         post_filter: measure which of the decoder's JPEG post-filters
             (:data:`lfstream.codec.jpeg.POST_FILTERS`, and a black floor) suits the centre
             view and name it in the JPEG (:func:`lfstream.codec.jpeg.choose_post_filter`;
-            7-11 ms a 375 x 540 view on the first frame and every hint key frame after it,
+            about 3 ms a 375 x 540 view on the first frame and every hint key frame after it,
             nothing on the frames between); ``False`` leaves every frame at the default
             filter, the bytes of earlier versions.
         device: where the hint's plane sweep runs: ``"cpu"`` (the kernels) or ``"cuda"``
@@ -219,7 +219,7 @@ class Encoder:
             if self.depth_hint:
                 hint = self._hints.encode(frame, seq, present)
         elif self.depth_hint:
-            # the centre view's coding (and the post-filter choice, 7-11 ms on key frames)
+            # the centre view's coding (and the post-filter choice, ~3 ms on key frames)
             # does not depend on the hint: overlapped with it on a worker thread (measured on
             # lytro_bikes, 2 cores: a single-frame encode 24.8 -> 20.2 ms); same bytes
             centre_job = in_background(lambda: self._code_centre(centre))
@@ -379,7 +379,7 @@ def encode(
     ``None`` (the default) for none; ``residual_mode``: what it codes (``prediction`` or
     ``views``, :attr:`Encoder.residual_mode`). ``post_filter``: name the decoder's JPEG
     post-filter the encoder measured best (:attr:`Encoder.post_filter`; ``False``: the
-    default filter, 7-11 ms less per key frame). ``device``: where the hint's plane sweep
+    default filter, about 3 ms less per key frame). ``device``: where the hint's plane sweep
     runs (:attr:`Encoder.device`; rate control's searches sweep on the CPU).
 
     Raises:

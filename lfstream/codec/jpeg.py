@@ -139,7 +139,7 @@ def deblock_jpeg(img: np.ndarray, scale: float, post_filter: PostFilter = POST_F
     every one (q50: +0.33 to +0.91 dB, mean +0.54; SSIM +0.002 to +0.02; q95: +0.02 to +0.2
     dB), and it beats the JPEG-Hance fast network trained on synthetic renders on each scene
     it was measured against (q10 / 30 / 50: +0.50..+0.83 / +0.45..+1.11 / +0.38..+0.91 dB
-    against -0.08..+0.43 / -0.34..+0.25); 2.5 ms a 375 x 540 view on two threads (5 on one).
+    against -0.08..+0.43 / -0.34..+0.25); 2.5 ms a 375 x 540 view on two Zen 3 threads (5 on one), 0.6 ms on two Zen 5 ones.
     Its strength was chosen among 0.15, 0.2 and 0.25 on those views.
 
     Shape:
@@ -241,7 +241,7 @@ def choose_post_filter(original: np.ndarray, data: bytes, bands: int = CHOICE_BA
     PSNR against the default filter; then, where the sample has black (0, 0, 0) pixels the
     JPEG decodes above 0, the black floor they decode at, kept by the same rule. The
     default where nothing measured is better by :data:`CHOICE_MIN_SSIM_GAIN` or the view
-    is too small to measure. 7-11 ms a 375 x 540 view (two threads, six bands).
+    is too small to measure. 2.8 ms a 375 x 540 view on two Zen 5 cores (7-11 ms on Zen 3 ones).
 
     Shape:
         - original: ``(H, W, 3)`` uint8
