@@ -573,10 +573,10 @@ def _gain_apply_row(src_row, top, bottom, b0, b1, dst_row):  # pragma: no cover 
 
 @numba.njit(parallel=True, cache=True, nogil=True)
 def apply_view_gains(views, which, gains, active, rows, row_w, cols, col_w, out):  # pragma: no cover - compiled
-    """Each view times its gain map bilinearly up-sampled, rounded to uint8: the bytes of
-    ``cv2.multiply(view, cv2.resize(gain, (W, H), INTER_LINEAR), dtype=CV_8U)`` view by view
-    (:func:`lfstream.codec.shading.apply_gains`), in one parallel pass that writes each
-    output byte once.
+    """Each view times its gain map bilinearly up-sampled, rounded to uint8, with OpenCV's
+    arithmetic for ``cv2.multiply(view, cv2.resize(gain, (W, H), INTER_LINEAR), dtype=CV_8U)``
+    view by view (:func:`lfstream.codec.shading.apply_gains`), in one parallel pass that
+    writes each output byte once.
 
     Args:
         views: (N, H, W * C) uint8, the distinct input views; view ``k`` of the output reads

@@ -127,6 +127,25 @@ def jpeg_quality_scale(data: bytes) -> float | None:
     return float(np.median(ratios) * 100.0)
 
 
+#: The widest bilateral filter OpenCV runs through IPP here: wider ones run OpenCV's own code,
+#: which gives the same bytes faster. Measured on a 375 x 540 view (OpenCV 5.0, IPP 2026.0
+#: AVX-512, two threads): 7 x 7 3.12 ms with IPP against 1.88 without, the same output; 5 x 5
+#: 0.58 against 0.81 (IPP faster), so those keep it.
+IPP_BILATERAL_MAX_DIAMETER = 5
+
+
+@contextmanager
+def _without_ipp():
+    """OpenCV without IPP on this thread meanwhile: ``cv::ipp::setUseIPP`` keeps its switch in
+    thread-local data, so other threads' OpenCV calls are not touched."""
+    was = cv2.ipp.useIPP()
+    cv2.ipp.setUseIPP(False)
+    try:
+        yield
+    finally:
+        cv2.ipp.setUseIPP(was)
+
+
 def deblock_jpeg(img: np.ndarray, scale: float, post_filter: PostFilter = POST_FILTERS[0]) -> np.ndarray:
     """The decoder's post-filter for a JPEG-decoded view: an edge-preserving bilateral filter
     whose range sigma follows the quantisation, ``post_filter.range_factor * scale`` levels
@@ -153,25 +172,6 @@ def deblock_jpeg(img: np.ndarray, scale: float, post_filter: PostFilter = POST_F
         return cv2.bilateralFilter(*args)
     with _without_ipp():
         return cv2.bilateralFilter(*args)
-
-
-#: The widest bilateral filter OpenCV runs through IPP here: wider ones run OpenCV's own code,
-#: which gives the same bytes faster. Measured on a 375 x 540 view (OpenCV 5.0, IPP 2026.0
-#: AVX-512, two threads): 7 x 7 3.12 ms with IPP against 1.88 without, the same output; 5 x 5
-#: 0.58 against 0.81 (IPP faster), so those keep it.
-IPP_BILATERAL_MAX_DIAMETER = 5
-
-
-@contextmanager
-def _without_ipp():
-    """OpenCV without IPP on this thread meanwhile: ``cv::ipp::setUseIPP`` keeps its switch in
-    thread-local data, so other threads' OpenCV calls are not touched."""
-    was = cv2.ipp.useIPP()
-    cv2.ipp.setUseIPP(False)
-    try:
-        yield
-    finally:
-        cv2.ipp.setUseIPP(was)
 
 
 def _names_post_filter(data: bytes) -> bool:

@@ -34,7 +34,7 @@ import numpy as np
 import zstandard
 
 from lfstream.codec.bitstream import decompress_bounded
-from lfstream.errors import BitstreamError, LFValueError
+from lfstream.errors import BitstreamError, LFShapeError, LFValueError
 
 _HEADER = struct.Struct("<BBBBBB")
 _REFERENCE = struct.Struct("<I")
@@ -306,14 +306,23 @@ def resize_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray]:
 
 def apply_gains(lf: np.ndarray, gains: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Multiplies each uint8 view ``(U, V, H, W, C)`` by its gain map ``(U, V, gh, gw, 1 or
-    C)`` bilinearly up-sampled, into ``out`` (a new array where ``None``). The bytes of
-    ``cv2.multiply(view, upsample_gain(gain), dtype=CV_8U)`` view by view, in one parallel
-    kernel (:func:`lfstream.codec._kernels.apply_view_gains`: every view of the built-in
-    clip's flat decode 11.1 -> 2 ms on two cores); ``lf`` may be a broadcast of one view (the
-    flat decode), which is then read as one."""
+    C)`` bilinearly up-sampled, into ``out`` (a new array where ``None``): OpenCV's arithmetic
+    for ``cv2.multiply(view, upsample_gain(gain), dtype=CV_8U)`` (INTER_LINEAR's taps and
+    float32 passes, the product rounded half to even), done in one parallel kernel
+    (:func:`lfstream.codec._kernels.apply_view_gains`; the synthetic clip's views 11-19 ->
+    1.1 ms on two cores) and so the same on every CPU, where OpenCV's own resize runs IPP's
+    CPU-specific code (within one level of it, on 0.01-0.03 % of samples here). ``lf`` may
+    be a broadcast of one view (the flat decode), which is then read as one.
+
+    Raises:
+        LFShapeError: gains that do not match the views.
+    """
     from lfstream.codec._kernels import apply_view_gains
 
     u, v, h, w, c = lf.shape
+    if np.ndim(gains) != 5 or np.shape(gains)[:2] != (u, v) or np.shape(gains)[4] not in (1, c) \
+            or min(np.shape(gains)[2:4]) < 1:
+        raise LFShapeError(f"gains: expected ({u}, {v}, gh, gw, 1 or {c}), got {np.shape(gains)}")
     out = np.empty((u, v, h, w, c), np.uint8) if out is None else out
     if lf.strides[0] == 0 and lf.strides[1] == 0:  # one view for all
         views = np.ascontiguousarray(lf[0, 0]).reshape(1, h, w * c)

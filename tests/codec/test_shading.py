@@ -297,3 +297,13 @@ def test_apply_gains_equals_its_reference_and_opencv_within_a_level(views, size,
     want = reference_apply_gains(lf, gains)
     for out in (np.zeros_like(lf), np.zeros((u, v, h, w, 4), np.uint8)[..., :3]):  # the latter strided
         assert apply_gains(lf, gains, out=out) is out and np.array_equal(out, want)
+
+
+@pytest.mark.parametrize("shape", [(3, 3, 2, 2), (3, 2, 2, 2, 3), (3, 3, 2, 2, 2), (3, 3, 0, 2, 3)])
+def test_apply_gains_refuses_maps_that_do_not_match_the_views(shape):
+    from lfstream.codec.shading import apply_gains
+    from lfstream.errors import LFShapeError
+
+    lf = np.zeros((3, 3, 8, 10, 3), np.uint8)
+    with pytest.raises(LFShapeError, match="gains"):
+        apply_gains(lf, np.ones(shape, np.float32))
