@@ -42,6 +42,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       help="send the encoder's disparity estimate (the default)")
     hint.add_argument("--no-depth-hint", dest="depth_hint", action="store_false",
                       help="send only the JPEG centre view (fewest bits, flat reconstruction)")
+    p.add_argument("--hance-map", action="store_true",
+                   help="send a JPEG-Hance strength map with each JPEG centre view, measured by the encoder on "
+                   "the decoded light field (the network and a warp per strength on key frames: about a second "
+                   "each on the CPU); decoding with --hance on then blends the network's correction by it")
     p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate to record (default: the input's, else 30)")
     p.add_argument("--device", default="cpu", help="where the hint's plane sweep runs: cpu (the default) or cuda "
                    "(rate control, --bpp, sweeps on the cpu)")
@@ -51,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.codec.encoder import Encoder, encode_file, write_stream_file
+    from lfstream.codec.encoder import Encoder, encode_file, with_default_hance_map, write_stream_file
     from lfstream.codec.rate import choose_default, uses_default_choice
     from lfstream.errors import LFValueError
     from lfstream.io._fs import check_new_file
@@ -72,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
         raise LFValueError("--residual: rate control (--bpp) chooses the residual layer itself; give one or the other")
     if residual_mode != "prediction" and residual is None:
         raise LFValueError("--residual-mode: needs --residual Q (the layer's quality)")
+    if args.hance_map and args.bpp is not None:
+        raise LFValueError("--hance-map: not with --bpp, whose configurations it does not measure")
     if args.bpp is not None:
         from lfstream.codec.rate import choose_configuration
 
@@ -88,17 +94,19 @@ def run(args: argparse.Namespace) -> int:
         # where the prediction misses them
         t0 = time.perf_counter()
         choice = choose_default(source.first, quality, present, device=args.device)
+        enc, first = choice.encoder, choice.first
+        if args.hance_map:
+            first = with_default_hance_map(enc, first, source.first, present)
         first_s = time.perf_counter() - t0
-        enc = choice.encoder
         preset, depth_hint, residual, residual_mode = enc.preset, enc.depth_hint, enc.residual, enc.residual_mode
-        stats = encode_file(frames, args.output, views, size, enc, fps=fps, present=present, first=choice.first)
+        stats = encode_file(frames, args.output, views, size, enc, fps=fps, present=present, first=first)
         stats.encode_s += first_s  # frame 0's fast encode and the check
         prediction_db = choice.prediction_db
         hint_scale = enc.hint_options.hint_scale
     else:
         stats = encode_file(frames, args.output, views, size,
                             Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
-                                    residual_mode=residual_mode, device=args.device), fps=fps,
+                                    residual_mode=residual_mode, device=args.device, hance_map=args.hance_map), fps=fps,
                             present=present)
     shape = (stats.frames, *source.first.shape)  # a video read frame by frame: as many as were encoded
     result = dataclasses.asdict(stats)

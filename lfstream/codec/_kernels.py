@@ -608,6 +608,37 @@ def apply_view_gains(views, which, gains, active, rows, row_w, cols, col_w, out)
 
 
 @numba.njit(**_PARALLEL)
+def squared_error_map(views, ref, present, out):  # pragma: no cover - compiled
+    """Per pixel, the squared error of ``views`` against ``ref`` summed over the views
+    ``present`` marks and the channels (integers: exact, in any order; rows in parallel).
+
+    Args:
+        views, ref: (U, V, H, W, C) uint8; present: (U, V) bool.
+        out: (H, W) int64, overwritten.
+    """
+    n_u, n_v, h, w, c = views.shape
+    for y in numba.prange(h):
+        row = out[y]
+        for x in range(w):
+            row[x] = 0
+        for a in range(n_u):
+            for b in range(n_v):
+                if not present[a, b]:
+                    continue
+                p = views[a, b, y].ravel()
+                q = ref[a, b, y].ravel()
+                acc = np.zeros(w * c, np.int32)  # at most 255**2 a sample: no overflow
+                for k in range(w * c):
+                    d = np.int32(p[k]) - np.int32(q[k])
+                    acc[k] = d * d
+                for x in range(w):
+                    s = np.int64(0)
+                    for j in range(c):
+                        s += acc[x * c + j]
+                    row[x] += s
+
+
+@numba.njit(**_PARALLEL)
 def row_fold_bounds(disp, rx, ry):  # pragma: no cover - compiled
     """:func:`fold_bounds` per row: ``rx[y]`` the largest ``|d(y, x+1) - d(y, x)| *
     max(|d(y, x)|, |d(y, x+1)|)`` of row ``y``, ``ry[y]`` the same between rows ``y`` and

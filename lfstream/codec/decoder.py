@@ -23,7 +23,7 @@ import numpy as np
 from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, Limits, Packet, StreamHeader, count_packets, iter_packets, read_header
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
-from lfstream.codec.jpeg import post_filter_jpeg
+from lfstream.codec.jpeg import blend_restored, hance_map, hance_strength, post_filter_jpeg
 from lfstream.codec.residual import VIEW_MODES, apply_residual, decode_residual, residual_mode
 from lfstream.codec.shading import GainDecoder, GainReferenceError
 from lfstream.codec.warp import warp_views, warp_views_per_view
@@ -39,6 +39,9 @@ HANCE_MODES = ("auto", "on", "off")
 # +0.05..+0.50 at q70, -0.84..+0.34 at q90; on the decoded LF at q30/50/70 seahorse
 # +0.17/-0.07/-0.21 dB, cotton and lytro_translucent +0.04..+0.32 (bench/networks.py, 2026-11-24).
 HANCE_MAX_QUALITY = {"fast": 60, "paper": 70}
+#: The JPEG-Hance preset an encoder's strength map is measured for (``Encoder(hance_map=True)``);
+#: a decoder running another preset restores at full strength.
+HANCE_MAP_PRESET = "fast"
 #: Presets "auto" runs on a CUDA device only: on the 2-core CPU the fast network costs
 #: 84-107 ms a 375 x 540 view (two threads; 90 ms in its manifest entry), about twice the
 #: rest of a 7x7 decode (~45 ms); ``hance="on"`` runs it anywhere.
@@ -192,7 +195,15 @@ class Decoder:
         if self._hance is not None:
             from lfstream.models.jpeg_hance import restore_images
 
-            centres = restore_images(centres, self._hance, self.device)
+            restored = restore_images(centres, self._hance, self.device)
+            if self.preset == HANCE_MAP_PRESET and self.header.codec == CODEC_JPEG:
+                # the encoder's strength map (measured for this preset's network), where the
+                # stream carries one: the correction blended in per tile (jpeg.hance_map)
+                for k, p in enumerate(packets):
+                    levels = hance_map(p.image, p.seq)
+                    if levels is not None:
+                        restored[k] = blend_restored(centres[k], restored[k], hance_strength(levels, centres.shape[1:3]))
+            centres = restored
         return centres
 
     def reconstruct(self, packet: Packet, centre: np.ndarray, disparity: np.ndarray) -> DecodedFrame:

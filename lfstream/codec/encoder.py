@@ -90,6 +90,12 @@ class Encoder:
             about 3 ms a 375 x 540 view on the first frame and every hint key frame after it,
             nothing on the frames between); ``False`` leaves every frame at the default
             filter, the bytes of earlier versions.
+        hance_map: send a JPEG-Hance strength map with the JPEG centre view
+            (:mod:`lfstream.codec.hance`): measured on the first frame and every hint key
+            frame after it by decoding the frame, running the network and warping at each
+            strength (the fast network on the CPU: about 0.2 s a 7x7x375x540 frame measured;
+            every frame is decoded to follow the stream). A decoder running JPEG-Hance (fast)
+            then blends its correction by the map. JPEG centres without a residual layer only.
         device: where the hint's plane sweep runs: ``"cpu"`` (the kernels) or ``"cuda"``
             (tensor operations, :mod:`lfstream.codec.sweep_batched`; the maps agree to float
             rounding, so the bytes may differ in a rare hint cell).
@@ -104,6 +110,7 @@ class Encoder:
     residual_mode: str = "prediction"
     post_filter: bool = True
     device: str = "cpu"
+    hance_map: bool = False
 
     def __post_init__(self) -> None:
         from lfstream.models.device import check_device
@@ -128,6 +135,19 @@ class Encoder:
         self._gains = GainTracker(self.hint_options.key_interval)  # key maps with the key hints' interval
         self._post_filters = PostFilterChooser(self.hint_options.key_interval)
         self.last_gains: np.ndarray | None = None  # the last frame's gain maps as measured (None: none sent)
+        if self.hance_map:
+            self.check_hance_map()
+        self._hance_reference = None  # the decoder that follows the stream for the strength map
+        self._hance_model = None
+        self._hance_levels: np.ndarray | None = None
+        self._hance_age: int | None = None  # frames since the map was measured
+        self.last_hance_map: np.ndarray | None = None  # the last frame's strength levels (None: none sent)
+
+    def check_hance_map(self) -> None:
+        """Refuses a strength map where it does not apply (an AV1 centre, a residual layer)."""
+        if self.coding.codec != "jpeg" or self.residual is not None:
+            raise LFValueError("hance_map: a JPEG-Hance strength map goes with a JPEG centre view (preset fast) "
+                               "and no residual layer")
 
     def header(self, views: tuple[int, int], size: tuple[int, int], fps: float) -> StreamHeader:
         from lfstream import __version__
@@ -231,7 +251,41 @@ class Encoder:
         packet = Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
         if self.residual is not None and frame.shape[0] * frame.shape[1] > 1:
             packet = self.add_residual(packet, frame, self.residual)
+        if self.hance_map:
+            packet = self.mark_hance(packet, frame, present)
         return packet
+
+    def mark_hance(self, packet: Packet, frame: np.ndarray, present: np.ndarray | None = None) -> Packet:
+        """``packet`` with the JPEG-Hance strength map in its JPEG (:attr:`hance_map`): the
+        packet is decoded as a decoder without JPEG-Hance decodes it (every packet, in stream
+        order, so that delta hints and gains resolve), and on the first and every hint key
+        interval's frame the map is measured (:func:`lfstream.codec.hance.measure_hance_map`);
+        the frames between repeat it."""
+        from dataclasses import replace
+
+        from lfstream.codec.decoder import HANCE_MAP_PRESET, Decoder
+        from lfstream.codec.hance import measure_hance_map
+        from lfstream.codec.jpeg import with_hance_map
+
+        frame = to_uint8(np.asarray(frame))
+        if self._hance_reference is None:
+            self._hance_reference = Decoder(self.header(frame.shape[:2], frame.shape[2:4], 30.0), depth="auto",
+                                            hance="off")
+        decoded = self._hance_reference.decode_packet(packet)
+        if self._hance_age is None or self._hance_age >= self.hint_options.key_interval:
+            from lfstream.models.jpeg_hance import restore_images
+            from lfstream.models.registry import load_model
+
+            if self._hance_model is None:
+                self._hance_model = load_model("jpeg_hance", HANCE_MAP_PRESET, "cpu")
+            restored = restore_images(decoded.centre[None], self._hance_model)[0]
+            self._hance_levels = measure_hance_map(frame, decoded.centre, restored, decoded.disparity, decoded.axes,
+                                                   decoded.gains, present,
+                                                   occlusion=self._hance_reference.occlusion)
+            self._hance_age = 0
+        self._hance_age += 1
+        self.last_hance_map = self._hance_levels
+        return replace(packet, image=with_hance_map(packet.image, self._hance_levels))
 
     def _gain_payload(self, frame: np.ndarray, seq: int, present: np.ndarray | None, hinted: bool,
                       measured: np.ndarray | None = None) -> bytes:
@@ -360,6 +414,7 @@ def encode(
     residual_mode: str = "prediction",
     post_filter: bool = True,
     device: str = "cpu",
+    hance_map: bool = False,
 ) -> bytes:
     """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
 
@@ -380,7 +435,9 @@ def encode(
     ``views``, :attr:`Encoder.residual_mode`). ``post_filter``: name the decoder's JPEG
     post-filter the encoder measured best (:attr:`Encoder.post_filter`; ``False``: the
     default filter, about 3 ms less per key frame). ``device``: where the hint's plane sweep
-    runs (:attr:`Encoder.device`; rate control's searches sweep on the CPU).
+    runs (:attr:`Encoder.device`; rate control's searches sweep on the CPU). ``hance_map``:
+    send a JPEG-Hance strength map with each JPEG centre view (:attr:`Encoder.hance_map`; the
+    default's choice of the views themselves, an AV1 sequence, carries none; not with ``bpp``).
 
     Raises:
         LFStreamError: bad shape, dtype, non-finite values or parameters.
@@ -398,6 +455,8 @@ def encode(
             raise LFValueError("residual: rate control (bpp) chooses the residual layer itself; give one or the other")
         if not post_filter:
             raise LFValueError("post_filter: rate control (bpp) names the post-filter itself; give one or the other")
+        if hance_map:
+            raise LFValueError("hance_map: not with rate control (bpp), whose configurations it does not measure")
         # rate control encoded every frame already: its stream is the answer
         return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream()
     from lfstream.codec.rate import choose_default, uses_default_choice
@@ -408,16 +467,30 @@ def encode(
         choice = choose_default(frames[0], quality, present, hint_options, gain_grid, post_filter=post_filter,
                                 device=device)
         enc, first = choice.encoder, choice.first
+        if hance_map:
+            first = with_default_hance_map(enc, first, frames[0], present)
     else:
         enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(),
                       gain_grid=gain_grid, preset=preset or DEFAULT_PRESET, residual=residual,
-                      residual_mode=residual_mode, post_filter=post_filter, device=device)
+                      residual_mode=residual_mode, post_filter=post_filter, device=device, hance_map=hance_map)
     buf = io.BytesIO()
     writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
     for t, frame in enumerate(frames):
         writer.write(first if t == 0 and first is not None else
                      enc.encode_frame(frame, t, int(round(t * 1e6 / fps)), present))
     return buf.getvalue()
+
+
+def with_default_hance_map(encoder: Encoder, first: Packet | None, frame: np.ndarray,
+                           present: np.ndarray | None = None) -> Packet | None:
+    """The default encode (:func:`lfstream.codec.rate.choose_default`) with JPEG-Hance strength
+    maps: where its ``encoder`` codes a JPEG centre view, it sends them from frame 0 on
+    (``first``, the packet the choice coded, is marked; it is final: any coarser hint is in
+    it); where the choice codes the views themselves (AV1), nothing changes."""
+    if encoder.coding.codec != "jpeg" or encoder.residual is not None:
+        return first
+    encoder.hance_map = True
+    return first if first is None else encoder.mark_hance(first, frame, present)
 
 
 def write_stream_file(path: str | os.PathLike, header: StreamHeader, packets: Iterable[Packet]) -> EncodeStats:
@@ -457,5 +530,5 @@ def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tu
 
 
 __all__ = ["ENCODER_NAME", "PRESETS", "DEFAULT_PRESET", "preset_coding", "Encoder", "EncodeStats", "encode", "encode_file",
-           "residual_meta",
+           "residual_meta", "with_default_hance_map",
            "write_stream_file", "frames_of"]

@@ -200,6 +200,110 @@ def with_post_filter(data: bytes, choice: PostFilterChoice) -> bytes:
     return data[:2] + segment + body
 
 
+#: The JPEG comment segment that carries a JPEG-Hance strength map (:func:`with_hance_map`):
+#: ``FF FE``, its length, ``LFHS``, rows, columns, then the tiles' levels (row-major, the
+#: strength ``level / HANCE_LEVELS``) three to a byte in base 5 (a 16 x 16 map in 86 bytes).
+#: After SOI and the post-filter segment, if any; decoders skip comments, and one that
+#: predates the map restores at full strength.
+HANCE_MAP_TAG = b"LFHS"
+#: Strength levels of a map: 0 (the post-filtered JPEG kept) to this (the network's output).
+HANCE_LEVELS = 4
+#: The largest map side a stream may carry, in tiles.
+MAX_HANCE_TILES = 64
+
+
+def _segment_start(data: bytes) -> int:
+    """Where lfstream's segments after the post-filter's begin (right after SOI without one)."""
+    return _NAMED + 2 if _names_post_filter(data) else 2
+
+
+def hance_map(data: bytes, frame: int | None = None) -> np.ndarray | None:
+    """The JPEG-Hance strength levels ``(rows, cols)`` uint8 (0..:data:`HANCE_LEVELS`) a JPEG
+    payload carries (:data:`HANCE_MAP_TAG`), ``None`` where it carries none.
+
+    Raises:
+        BitstreamError: a damaged or out-of-range map (names ``frame``).
+    """
+    at = _segment_start(data)
+    if data[at:at + 2] != b"\xff\xfe" or data[at + 4:at + 8] != HANCE_MAP_TAG:
+        return None
+    if at + 10 > len(data):
+        raise BitstreamError("centre view's JPEG-Hance map: truncated", frame)
+    length = int.from_bytes(data[at + 2:at + 4], "big")
+    rows, cols = data[at + 8], data[at + 9]
+    if not (1 <= rows <= MAX_HANCE_TILES and 1 <= cols <= MAX_HANCE_TILES) \
+            or length != 8 + _packed_size(rows * cols) or at + 2 + length > len(data):
+        raise BitstreamError(f"centre view's JPEG-Hance map: {rows}x{cols} tiles in a {length}-byte segment", frame)
+    packed = np.frombuffer(data, np.uint8, _packed_size(rows * cols), at + 10)
+    if packed.max() >= _BASE ** 3:
+        raise BitstreamError(f"centre view's JPEG-Hance map: a byte {int(packed.max())} beyond three levels", frame)
+    levels = np.stack([packed % _BASE, packed // _BASE % _BASE, packed // _BASE ** 2], axis=1).reshape(-1)
+    return levels[: rows * cols].reshape(rows, cols).astype(np.uint8)
+
+
+_BASE = HANCE_LEVELS + 1  # levels are packed three to a byte in this base
+
+
+def _packed_size(tiles: int) -> int:
+    return (tiles + 2) // 3
+
+
+def with_hance_map(data: bytes, levels: np.ndarray | None) -> bytes:
+    """The JPEG ``data`` carrying the strength ``levels`` ``(rows, cols)`` (``None``: none),
+    replacing any map it carried; its post-filter segment stays first."""
+    at = _segment_start(data)
+    body = data[at:]
+    old = hance_map(data)
+    if old is not None:
+        body = body[10 + _packed_size(old.size):]
+    if levels is None:
+        return data[:at] + body
+    levels = np.asarray(levels)
+    if levels.ndim != 2 or not (1 <= min(levels.shape) and max(levels.shape) <= MAX_HANCE_TILES) \
+            or levels.min() < 0 or levels.max() > HANCE_LEVELS:
+        raise LFValueError(f"JPEG-Hance map: (rows, cols) levels 0..{HANCE_LEVELS}, at most {MAX_HANCE_TILES} a side, "
+                           f"got {levels.shape}")
+    rows, cols = levels.shape
+    flat = np.zeros(3 * _packed_size(rows * cols), np.int64)
+    flat[: rows * cols] = levels.reshape(-1)
+    triples = flat.reshape(-1, 3)
+    packed = (triples[:, 0] + _BASE * triples[:, 1] + _BASE ** 2 * triples[:, 2]).astype(np.uint8)
+    segment = b"\xff\xfe" + (8 + packed.size).to_bytes(2, "big") + HANCE_MAP_TAG + bytes([rows, cols]) \
+        + packed.tobytes()
+    return data[:at] + segment + body
+
+
+def hance_strength(levels: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """A strength map's levels as strengths in [0, 1] over a ``size`` ``(H, W)`` view: the
+    tiles' values bilinearly up-sampled from their centres (so tiles leave no seams), in
+    float32 numpy, the same on every machine.
+
+    Shape:
+        - levels: ``(rows, cols)``; output: ``(H, W)`` float32
+    """
+    from lfstream.codec.shading import resize_taps
+
+    h, w = size
+    tiles = np.asarray(levels, np.float32) / np.float32(HANCE_LEVELS)
+    rows, row_w = resize_taps(h, tiles.shape[0])
+    cols, col_w = resize_taps(w, tiles.shape[1])
+    across = tiles[:, cols[:, 0]] * col_w[:, 0] + tiles[:, cols[:, 1]] * col_w[:, 1]
+    return (across[rows[:, 0]] * row_w[:, 0, None] + across[rows[:, 1]] * row_w[:, 1, None]).astype(np.float32)
+
+
+def blend_restored(filtered: np.ndarray, restored: np.ndarray, strength: np.ndarray | float) -> np.ndarray:
+    """``filtered + strength * (restored - filtered)``, rounded to uint8: the network's
+    correction at a strength (a map ``(H, W)`` or one value); 1 gives ``restored`` and 0
+    ``filtered`` exactly.
+
+    Shape:
+        - filtered, restored: ``(H, W, 3)`` uint8; output the same
+    """
+    s = np.asarray(strength, np.float32)
+    s = s[..., None] if s.ndim == 2 else s
+    a = filtered.astype(np.float32)
+    return np.clip(np.rint(a + s * (restored.astype(np.float32) - a)), 0, 255).astype(np.uint8)
+
 def _snap_black(img: np.ndarray, floor: int) -> np.ndarray:
     """``img`` with the pixels whose channels are all at or below ``floor`` set to 0."""
     if floor:
@@ -332,4 +436,5 @@ def jpeg_roundtrip(img: np.ndarray, quality: int, deblock: bool = False) -> np.n
 __all__ = ["QUALITY_RANGE", "PostFilter", "POST_FILTERS", "MAX_BLACK_FLOOR", "PostFilterChoice", "POST_FILTER_TAG",
            "encode_jpeg", "decode_jpeg", "jpeg_quality_scale", "deblock_jpeg", "named_post_filter", "with_post_filter",
            "post_filter_jpeg",
-           "choose_post_filter", "PostFilterChooser", "jpeg_roundtrip"]
+           "choose_post_filter", "PostFilterChooser", "jpeg_roundtrip", "HANCE_MAP_TAG", "HANCE_LEVELS",
+           "MAX_HANCE_TILES", "hance_map", "with_hance_map", "hance_strength", "blend_restored"]

@@ -582,3 +582,21 @@ def test_a_video_whose_size_does_not_fit_the_grid_is_refused_before_streaming(ca
     code, _, err = run(capsys, "stream", "clip.mp4", "--grid", "3x3")
     assert code == 2 and "not a multiple of the view grid 3x3" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "lfstream-out").exists()
+
+
+def test_encode_hance_map_sends_strength_maps_and_refuses_rate_control(capsys, tmp_path):
+    import lfstream
+    from lfstream.codec.bitstream import split_stream
+    from lfstream.codec.jpeg import hance_map
+
+    lf = synth_clip(2, 5, (48, 64), seed=6).lf
+    np.save(tmp_path / "lf.npy", lf)
+    code, out, _ = run(capsys, "encode", tmp_path / "lf.npy", "-o", tmp_path / "a.lfs", "--preset", "fast",
+                       "--hance-map", "--json")
+    assert code == 0 and json.loads(out)["frames"] == 2
+    data = (tmp_path / "a.lfs").read_bytes()
+    assert all(hance_map(p.image) is not None for p in split_stream(data)[1])
+    assert data == lfstream.encode(lf, preset="fast", hance_map=True)  # the CLI writes what the library makes
+    code, _, err = run(capsys, "encode", tmp_path / "lf.npy", "-o", tmp_path / "b.lfs", "--bpp", "0.05", "--hance-map")
+    assert code == 2 and "--hance-map" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "b.lfs").exists()
