@@ -2,10 +2,11 @@
 
 Draws light fields and videos of random grids, sizes and content (noise, constant, a hard
 edge, a texture with parallax along random view axes) and random options (quality, preset,
-rate control's target, the residual layer, no hint, missing views), and checks that every
-encode either is refused with an ``LFStreamError`` (an option the input cannot take, named
-in one line) or gives the same bytes twice, and that the stream decodes to uint8 views of
-the input's shape. The test suite runs the stability test's short random search and a few
+rate control's target, the residual layer, no hint, JPEG-Hance strength maps, missing
+views), and checks that every encode either is refused with an ``LFStreamError`` (an option
+the input cannot take, named in one line) or gives the same bytes twice, and that the stream
+decodes to uint8 views of the input's shape (with JPEG-Hance too where the encoder sent its
+strength maps). The test suite runs the stability test's short random search and a few
 of these cases; this is the long run (it found a key hint with an inverted range, which
 the decoder refused: a tiny noisy frame whose whole map lay past the range swept).
 
@@ -74,6 +75,8 @@ def draw_case(rng: np.random.Generator, min_size: int = 8, max_size: int = 72) -
         options["preset"], options["residual"] = "fast", int(rng.integers(1, 101))
     elif r < 0.65:
         options["depth_hint"] = False
+    elif r < 0.72:
+        options["preset"], options["hance_map"] = "fast", True  # JPEG-Hance strength maps
     if lf.ndim == 5 and u * v > 1 and rng.random() < 0.3:
         present = rng.random((u, v)) < 0.7
         present[u // 2, v // 2] = True  # the codec sends the centre view
@@ -89,9 +92,10 @@ def run_case(case: Case) -> str:
     except LFStreamError:
         return "refused"
     assert data == lfstream.encode(case.lf.copy(), **case.options), "the same input gave other bytes"
-    out = lfstream.decode(data)
     frames = case.lf.shape[0] if case.lf.ndim == 6 else 1
-    assert out.dtype == np.uint8 and out.shape == (frames, *case.lf.shape[-5:]), (out.shape, out.dtype)
+    for hance in ("auto", "on") if case.options.get("hance_map") else ("auto",):  # the map is used with the network
+        out = lfstream.decode(data, hance=hance)
+        assert out.dtype == np.uint8 and out.shape == (frames, *case.lf.shape[-5:]), (out.shape, out.dtype)
     return "decoded"
 
 
