@@ -47,13 +47,16 @@ def describe(loaded) -> dict:
 
 def describe_stream(path: Path, frames: int) -> dict:
     """What an ``.lfs`` file's header says it carries: format version, the centre view's
-    codec and preset, quality, depth hint, residual layer (quality and mode), file bytes and
-    bits per pixel of the light field."""
-    from lfstream.codec.bitstream import CODEC_NAMES, read_header, read_packet
+    codec and preset, quality, depth hint, residual layer (quality and mode), whether frame 0
+    carries a JPEG-Hance strength map (its tiles), file bytes and bits per pixel of the
+    light field."""
+    from lfstream.codec.bitstream import CODEC_JPEG, CODEC_NAMES, read_header, read_packet
+    from lfstream.codec.jpeg import hance_map
 
     with open(path, "rb") as fh:
         header = read_header(fh)
-        first = read_packet(fh, header) if header.has_hint else None
+        first = read_packet(fh, header) if header.has_hint or header.codec == CODEC_JPEG else None
+    levels = hance_map(first.image, first.seq) if first is not None and header.codec == CODEC_JPEG else None
     u, v = header.views
     h, w = header.size
     size = path.stat().st_size
@@ -62,6 +65,7 @@ def describe_stream(path: Path, frames: int) -> dict:
             "preset": header.meta.get("preset", "fast"), "quality": header.quality, "depth_hint": header.has_hint,
             "hint_scale": header.meta.get("hint", {}).get("hint_scale") if header.has_hint else None,
             "view_axes": _view_axes(first, header.size),
+            "hance_map": None if levels is None else list(levels.shape),
             "residual": None if residual is None else residual.get("quality"),
             "residual_mode": None if residual is None else residual.get("mode", "prediction"),
             "file_bytes": size, "bpp": 8.0 * size / max(frames * u * v * h * w, 1)}
@@ -102,6 +106,9 @@ def _text(info: dict) -> str:
                      f"{layers}; {s['file_bytes']} bytes, {s['bpp']:.5f} bpp")
         if s.get("view_axes"):
             lines.append(f"  axes    the views move along {s['view_axes']} (rows dy, dx; the convention: identity)")
+        if s.get("hance_map"):
+            rows, cols = s["hance_map"]
+            lines.append(f"  hance   a JPEG-Hance strength map of {rows} x {cols} tiles (decode with --hance on to use it)")
     return "\n".join(lines)
 
 

@@ -407,7 +407,7 @@ def test_info_on_a_stream_says_what_it_carries(capsys, tmp_path):
     assert main(["info", str(tmp_path / "a.lfs"), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)["stream"]
     assert s == {"version": 1, "centre_codec": "jpeg", "preset": "fast", "quality": 40, "depth_hint": True,
-                 "hint_scale": 4, "view_axes": None, "residual": None, "residual_mode": None, "file_bytes": len(data),
+                 "hint_scale": 4, "view_axes": None, "hance_map": None, "residual": None, "residual_mode": None, "file_bytes": len(data),
                  "bpp": pytest.approx(8 * len(data) / (2 * 7 * 7 * 64 * 96))}
     (tmp_path / "b.lfs").write_bytes(lfstream.encode(lf, quality=40, preset="best", residual=30))
     assert main(["info", str(tmp_path / "b.lfs")]) == 0
@@ -597,6 +597,13 @@ def test_encode_hance_map_sends_strength_maps_and_refuses_rate_control(capsys, t
     data = (tmp_path / "a.lfs").read_bytes()
     assert all(hance_map(p.image) is not None for p in split_stream(data)[1])
     assert data == lfstream.encode(lf, preset="fast", hance_map=True)  # the CLI writes what the library makes
+    code, out, _ = run(capsys, "info", tmp_path / "a.lfs", "--json")
+    assert code == 0 and json.loads(out)["stream"]["hance_map"] == [16, 16]
+    code, out, _ = run(capsys, "info", tmp_path / "a.lfs")
+    assert "strength map of 16 x 16 tiles" in out
+    (tmp_path / "plain.lfs").write_bytes(lfstream.encode(lf, preset="fast"))
+    code, out, _ = run(capsys, "info", tmp_path / "plain.lfs", "--json")
+    assert code == 0 and json.loads(out)["stream"]["hance_map"] is None
     code, _, err = run(capsys, "encode", tmp_path / "lf.npy", "-o", tmp_path / "b.lfs", "--bpp", "0.05", "--hance-map")
     assert code == 2 and "--hance-map" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "b.lfs").exists()
