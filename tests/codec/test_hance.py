@@ -166,3 +166,16 @@ def test_the_squared_error_kernel_equals_numpy_over_the_views_present(rng):
     squared_error_map(a, b, present, out)
     want = np.square(a[present].astype(np.int64) - b[present]).sum(axis=(0, 3))
     np.testing.assert_array_equal(out, want)
+
+
+def test_the_default_encode_of_views_it_codes_as_a_sequence_sends_no_map():
+    """toys_array: the default codes the views themselves (an AV1 sequence, no JPEG centre),
+    so hance_map changes nothing."""
+    from lfstream.codec.bitstream import CODEC_AV1
+    from tests.conftest import shared
+
+    lf = lfstream.read_lf(shared("toys_array"))
+    data = lfstream.encode(lf, hance_map=True)
+    header, _ = split_stream(data)
+    assert header.codec == CODEC_AV1 and header.has_residual
+    assert data == lfstream.encode(lf)
