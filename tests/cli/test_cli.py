@@ -407,7 +407,8 @@ def test_info_on_a_stream_says_what_it_carries(capsys, tmp_path):
     assert main(["info", str(tmp_path / "a.lfs"), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)["stream"]
     assert s == {"version": 1, "centre_codec": "jpeg", "preset": "fast", "quality": 40, "depth_hint": True,
-                 "hint_scale": 4, "view_axes": None, "hance_map": None, "residual": None, "residual_mode": None, "file_bytes": len(data),
+                 "hint_scale": 4, "view_axes": None, "hance_map": None, "residual": None, "residual_mode": None,
+                 "file_bytes": len(data),
                  "bpp": pytest.approx(8 * len(data) / (2 * 7 * 7 * 64 * 96))}
     (tmp_path / "b.lfs").write_bytes(lfstream.encode(lf, quality=40, preset="best", residual=30))
     assert main(["info", str(tmp_path / "b.lfs")]) == 0
