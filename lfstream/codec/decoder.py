@@ -43,8 +43,10 @@ HANCE_MAX_QUALITY = {"fast": 60, "paper": 70}
 #: a decoder running another preset restores at full strength.
 HANCE_MAP_PRESET = "fast"
 #: Presets "auto" runs on a CUDA device only: on the 2-core CPU the fast network costs
-#: 84-107 ms a 375 x 540 view (two threads; 90 ms in its manifest entry), about twice the
-#: rest of a 7x7 decode (~45 ms); ``hance="on"`` runs it anywhere.
+#: 84-107 ms a 375 x 540 view on the Zen 3 machine (two threads; 90 ms in its manifest entry),
+#: about twice the rest of a 7x7 decode (~45 ms); on the Zen 5 one 40-43 ms with its
+#: activations in place, still about three times the rest of the decode (~15 ms);
+#: ``hance="on"`` runs it anywhere.
 HANCE_AUTO_GPU_ONLY = ("fast",)
 #: Frames per network batch the decoder accepts.
 BATCH_RANGE = (1, 256)

@@ -35,7 +35,7 @@ from torch import nn
 
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import to_network_input
-from lfstream.models.layers import Bottleneck, count_params
+from lfstream.models.layers import ELU, Bottleneck, count_params
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,7 @@ class DepthNet(nn.Module):
         self.config = config
         cin = 4 if config.hint else 3
         self.stem = nn.Sequential(nn.Conv2d(cin, config.stem, 7, stride=2, padding=3, bias=False),
-                                  nn.InstanceNorm2d(config.stem, affine=True), nn.ELU())
+                                  nn.InstanceNorm2d(config.stem, affine=True), ELU())
         self.down = nn.ModuleList()
         prev = config.stem
         widths = [config.stem]
@@ -103,7 +103,7 @@ class DepthNet(nn.Module):
         self.skip_index: list[int] = []
         for level in range(levels - 1, stop - 1, -1):
             target = widths[level] if level >= 0 else max(config.stem // 2, 16)
-            self.up.append(nn.Sequential(nn.ConvTranspose2d(prev, target, 2, stride=2), nn.ELU()))
+            self.up.append(nn.Sequential(nn.ConvTranspose2d(prev, target, 2, stride=2), ELU()))
             self.skip_index.append(level)
             prev = target
         self.head = nn.Conv2d(prev, config.views[0] * config.views[1], 3, padding=1)
@@ -179,7 +179,7 @@ def view_correction(corrections, oy, ox):
 
 
 def _conv(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
-    return nn.Sequential(nn.Conv2d(cin, cout, 3, stride=stride, padding=1), nn.ELU())
+    return nn.Sequential(nn.Conv2d(cin, cout, 3, stride=stride, padding=1), ELU())
 
 
 class DepthRefiner(nn.Module):

@@ -21,7 +21,7 @@ from torch import nn
 
 from lfstream.errors import LFShapeError
 from lfstream.lightfield import to_network_input
-from lfstream.models.layers import Bottleneck, count_params
+from lfstream.models.layers import ELU, Bottleneck, count_params
 
 
 @dataclass(frozen=True)
@@ -63,16 +63,16 @@ class JPEGHance(nn.Module):
     def __init__(self, config: HanceConfig = HANCE_PRESETS["fast"]) -> None:
         super().__init__()
         self.config = config
-        self.stem = nn.Sequential(nn.Conv2d(3, config.stem, 3, padding=1), nn.ELU())
+        self.stem = nn.Sequential(nn.Conv2d(3, config.stem, 3, padding=1), ELU())
         layers: list[nn.Module] = []
         prev = config.stem
         for channels, blocks in config.stages:
             if channels != prev:
-                layers += [nn.Conv2d(prev, channels, 1), nn.ELU()]
+                layers += [nn.Conv2d(prev, channels, 1), ELU()]
             layers += [Bottleneck(channels, max(channels // 2, 4), channels, config.norm, "elu") for _ in range(blocks)]
             prev = channels
         if prev != config.stem:
-            layers += [nn.Conv2d(prev, config.stem, 1), nn.ELU()]
+            layers += [nn.Conv2d(prev, config.stem, 1), ELU()]
         self.body = nn.Sequential(*layers)
         self.head = nn.Conv2d(config.stem, 3, 3, padding=1)
         # Start as the identity: the untrained network returns its input.
