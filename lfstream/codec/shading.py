@@ -286,11 +286,29 @@ def upsample_gain(gain: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return cv2.resize(np.asarray(gain, np.float32), (w, h), interpolation=cv2.INTER_LINEAR).reshape(h, w, -1)
 
 
+def check_gain_maps(gains: np.ndarray, views: tuple[int, int], channels: int) -> np.ndarray:
+    """Per-view gain maps ``(U, V, gh, gw, 1 or C)`` for ``views`` ``(U, V)`` of ``channels``
+    channels, as C-contiguous float32 (the warp's and :func:`apply_gains`'s one check).
+
+    Raises:
+        LFShapeError: maps that do not match the views, or without a cell.
+    """
+    u, v = views
+    gains = np.ascontiguousarray(gains, np.float32)
+    if gains.ndim != 5 or gains.shape[:2] != (u, v) or gains.shape[4] not in (1, channels) \
+            or min(gains.shape[2:4]) < 1:
+        raise LFShapeError(f"gains: expected ({u}, {v}, gh, gw, 1 or {channels}), got {gains.shape}")
+    return gains
+
+
 def resize_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray]:
     """OpenCV's INTER_LINEAR taps for resizing ``n_in`` float samples to ``n_out``, computed
     as OpenCV computes them (the source position in float32 from a double expression, the
     weights ``1 - f`` and ``f`` in float32, clamped at the ends): per output sample the two
-    input indices ``(n_out, 2)`` int64 and their weights ``(n_out, 2)`` float32."""
+    input indices ``(n_out, 2)`` int64 and their weights ``(n_out, 2)`` float32. The warp
+    kernel's gains use :func:`lfstream.codec.warp._linear_taps` instead, the same taps with
+    the weights computed in float64: they differ from these in the last bit for most sizes
+    (375 of 4 cells: 181 of 375), and the hint path's decoded bytes follow those."""
     scale = 1.0 / (n_out / n_in)  # OpenCV's scale_x = 1 / inv_scale_x
     f = ((np.arange(n_out, dtype=np.float64) + 0.5) * scale - 0.5).astype(np.float32)
     i0 = np.floor(f).astype(np.int64)
@@ -320,9 +338,7 @@ def apply_gains(lf: np.ndarray, gains: np.ndarray, out: np.ndarray | None = None
     from lfstream.codec._kernels import apply_view_gains
 
     u, v, h, w, c = lf.shape
-    if np.ndim(gains) != 5 or np.shape(gains)[:2] != (u, v) or np.shape(gains)[4] not in (1, c) \
-            or min(np.shape(gains)[2:4]) < 1:
-        raise LFShapeError(f"gains: expected ({u}, {v}, gh, gw, 1 or {c}), got {np.shape(gains)}")
+    gains = check_gain_maps(gains, (u, v), c)
     out = np.empty((u, v, h, w, c), np.uint8) if out is None else out
     if lf.strides[0] == 0 and lf.strides[1] == 0:  # one view for all
         views = np.ascontiguousarray(lf[0, 0]).reshape(1, h, w * c)
@@ -330,7 +346,6 @@ def apply_gains(lf: np.ndarray, gains: np.ndarray, out: np.ndarray | None = None
     else:
         views = np.ascontiguousarray(lf).reshape(u * v, h, w * c)
         which = np.arange(u * v, dtype=np.int64)
-    gains = np.ascontiguousarray(gains, np.float32)
     active = ~np.all(np.abs(gains - 1.0) < 1e-6, axis=(2, 3, 4)).reshape(-1)
     rows, row_w = resize_taps(h, gains.shape[2])
     cols, col_w = resize_taps(w, gains.shape[3])
@@ -342,4 +357,5 @@ def apply_gains(lf: np.ndarray, gains: np.ndarray, out: np.ndarray | None = None
 
 
 __all__ = ["GAIN_DEADBAND", "GainDecoder", "GainReferenceError", "GainTracker", "shading_present", "measure_gains",
-           "quantise_gains", "dequantise_gains", "encode_gains", "decode_gains", "upsample_gain", "resize_taps", "apply_gains"]
+           "quantise_gains", "dequantise_gains", "encode_gains", "decode_gains", "upsample_gain", "check_gain_maps",
+           "resize_taps", "apply_gains"]

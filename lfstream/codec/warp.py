@@ -197,7 +197,9 @@ def _splat_mask(mx: float, my: float, offsets: np.ndarray, tolerance: float) -> 
 def _linear_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray]:
     """OpenCV's INTER_LINEAR resize taps from ``n_in`` to ``n_out`` samples (half-pixel
     centres, clamped at the ends): per output sample the two input indices and the weight
-    of the first."""
+    of the first, computed in float64 (OpenCV's own float32 weights are
+    :func:`lfstream.codec.shading.resize_taps`, the flat decode's; these stay because the
+    warp's bytes, on the CPU and the GPU, follow them)."""
     f = (np.arange(n_out, dtype=np.float64) + 0.5) * (n_in / n_out) - 0.5
     i0 = np.floor(f)
     frac = f - i0
@@ -316,12 +318,11 @@ def _check_views(views: tuple[int, int], name: str = "views") -> tuple[int, int]
 
 def _check_gains(gains: np.ndarray | None, views: tuple[int, int], c: int) -> np.ndarray | None:
     """The gain maps as float32, or ``None`` where there are none or all are 1."""
+    from lfstream.codec.shading import check_gain_maps
+
     if gains is None:
         return None
-    u, v = views
-    gains = np.ascontiguousarray(gains, np.float32)
-    if gains.ndim != 5 or gains.shape[:2] != (u, v) or gains.shape[4] not in (1, c):
-        raise LFShapeError(f"gains: expected ({u}, {v}, gh, gw, 1 or {c}), got {gains.shape}")
+    gains = check_gain_maps(gains, views, c)
     return None if np.all(np.abs(gains - 1.0) < 1e-6) else gains
 
 
