@@ -143,9 +143,15 @@ class Encoder:
         self._hance_age: int | None = None  # frames since the map was measured
         self.last_hance_map: np.ndarray | None = None  # the last frame's strength levels (None: none sent)
 
+    @property
+    def takes_hance_map(self) -> bool:
+        """Whether a JPEG-Hance strength map applies to this encoder's streams: a JPEG centre
+        view and no residual layer (:attr:`hance_map`)."""
+        return self.coding.codec == "jpeg" and self.residual is None
+
     def check_hance_map(self) -> None:
-        """Refuses a strength map where it does not apply (an AV1 centre, a residual layer)."""
-        if self.coding.codec != "jpeg" or self.residual is not None:
+        """Refuses a strength map where it does not apply (:attr:`takes_hance_map`)."""
+        if not self.takes_hance_map:
             raise LFValueError("hance_map: a JPEG-Hance strength map goes with a JPEG centre view (preset fast) "
                                "and no residual layer")
 
@@ -487,7 +493,7 @@ def with_default_hance_map(encoder: Encoder, first: Packet | None, frame: np.nda
     maps: where its ``encoder`` codes a JPEG centre view, it sends them from frame 0 on
     (``first``, the packet the choice coded, is marked; it is final: any coarser hint is in
     it); where the choice codes the views themselves (AV1), nothing changes."""
-    if encoder.coding.codec != "jpeg" or encoder.residual is not None:
+    if not encoder.takes_hance_map:
         return first
     encoder.hance_map = True
     return first if first is None else encoder.mark_hance(first, frame, present)
