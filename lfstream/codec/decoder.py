@@ -15,6 +15,7 @@ import io
 import os
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -538,17 +539,12 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
                 hance: str = "auto", device: str = "cpu") -> tuple[np.ndarray, float]:
     """Decodes an ``.lfs`` file; returns ``(lf, fps)``."""
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            header = read_header(fh)
-            out = _video_array(header, count_packets(fh, header)[0], max_frames)
-            fh.seek(0)
-            frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device,
-                                                out=out)]
-    except OSError as exc:
-        raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-    except BitstreamError as exc:
-        raise BitstreamError(f"{path}: {exc}") from exc
+    with _errors_naming(path), open(path, "rb") as fh:
+        header = read_header(fh)
+        out = _video_array(header, count_packets(fh, header)[0], max_frames)
+        fh.seek(0)
+        frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device,
+                                            out=out)]
     if not frames:
         raise BitstreamError(f"{path}: stream holds no frames")
     return _stacked(frames, out), header.fps
@@ -570,30 +566,32 @@ def lfs_frames(path: str | os.PathLike, max_frames: int | None = None
         BitstreamError: damage, named with the file (the frames before it are yielded first).
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            header = read_header(fh)
-            count, damage = count_packets(fh, header)
-    except OSError as exc:
-        raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-    except BitstreamError as exc:
-        raise BitstreamError(f"{path}: {exc}") from exc
+    with _errors_naming(path), open(path, "rb") as fh:
+        header = read_header(fh)
+        count, damage = count_packets(fh, header)
     if damage is not None:
         raise BitstreamError(f"{path}: {damage}") from damage
     if count == 0:
         raise BitstreamError(f"{path}: stream holds no frames")
 
     def frames() -> Iterator[np.ndarray]:
-        try:
-            with open(path, "rb") as fh:
-                for f in iter_decode(fh, max_frames=max_frames):
-                    yield f.lf
-        except OSError as exc:
-            raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-        except BitstreamError as exc:
-            raise BitstreamError(f"{path}: {exc}") from exc
+        with _errors_naming(path), open(path, "rb") as fh:
+            for f in iter_decode(fh, max_frames=max_frames):
+                yield f.lf
 
     return frames(), header, min(count, max_frames or count)
+
+
+@contextmanager
+def _errors_naming(path: str | os.PathLike) -> Iterator[None]:
+    """A file's read errors as lfstream's, naming the file: :class:`LFFileError` for the
+    system's, :class:`BitstreamError` (its message prefixed) for a damaged stream."""
+    try:
+        yield
+    except OSError as exc:
+        raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    except BitstreamError as exc:
+        raise BitstreamError(f"{path}: {exc}") from exc
 
 
 __all__ = ["DEPTH_MODES", "HANCE_MODES", "HANCE_MAX_QUALITY", "BATCH_RANGE", "BESIDE_MIN_BITS", "Decoder",
