@@ -99,4 +99,3 @@ def run(args: argparse.Namespace) -> int:
     result = {"frames": count, "decode_s": decode_s, "output": str(args.output)}
     emit(args, result, f"{count} frame(s) decoded in {decode_s:.3f} s -> {args.output}")
     return 0
-
