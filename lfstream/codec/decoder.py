@@ -168,6 +168,15 @@ class Decoder:
         return self.decode_batch([packet])[0]
 
     @property
+    def uses_depth_net(self) -> bool:
+        return self._depth_net is not None
+
+    @property
+    def runs_networks(self) -> bool:
+        """Whether decoding runs a network (JPEG-Hance or Depth-Net), hence torch."""
+        return self.uses_hance or self.uses_depth_net
+
+    @property
     def estimates_depth(self) -> bool:
         """Whether frames get a disparity of their own (hint or Depth-Net), not flat."""
         return self.depth in ("hint", "net") or (self.depth == "auto" and self.header.has_hint)

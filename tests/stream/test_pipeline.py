@@ -433,6 +433,30 @@ def test_the_warm_up_decodes_on_the_streams_device(monkeypatch):
     assert seen["device"] == "cuda:7" and seen["hance"] == "off"
 
 
+def test_the_warm_up_runs_the_networks_the_streams_decoder_runs(monkeypatch):
+    """With ``--hance on`` and ``--depth net`` the warm-up imports torch and runs both
+    networks once on its tiny frame (the first timed frame paid 0.8 s of torch's import
+    before); the default stream's warm-up runs neither (its decoder runs none on the CPU)."""
+    import lfstream.models.depth_net as depth_net
+    import lfstream.models.jpeg_hance as jpeg_hance
+    from lfstream.stream.warmup import warm_kernels
+
+    ran = []
+    for module, name, label in ((jpeg_hance, "restore_images", "hance"),
+                                (depth_net, "predict_view_disparities", "depth")):
+        real = getattr(module, name)
+
+        def spy(*args, _fn=real, _label=label, **kwargs):
+            ran.append(_label)
+            return _fn(*args, **kwargs)
+        monkeypatch.setattr(module, name, spy)
+    warm_kernels(StreamConfig(refocus="sas", save=(), hance="on", depth="net"))
+    assert sorted(ran) == ["depth", "hance"]
+    ran.clear()
+    warm_kernels(StreamConfig(refocus="sas", save=()))
+    assert ran == []
+
+
 @pytest.mark.parametrize("stored", ["transposed", "rows flipped", "quarter turn"])
 def test_the_refocus_stage_focuses_a_grid_stored_off_the_convention_as_its_own_order(stored):
     """A capture whose view grid is flipped or swapped (the hint carries its axes): the
