@@ -510,16 +510,27 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, spla
             _row_sample(packed, stride, idx, fxs, fys, taps, channels, ch0, n_ch, gathered, accs, out[u, v, y])
 
 
-@numba.njit(**_PARALLEL)
-def splat_all_views(disp, offsets, splat, reach, out):  # pragma: no cover - compiled
+@numba.njit(**_EXACT)
+def _add_view_correction(dst, c0, cy, cx, oy, ox):  # pragma: no cover - compiled
+    """``dst += (c0 + oy * cy) + ox * cx`` along one row, in float32 and in numpy's order
+    (no fused multiply-add: exact, whatever the caller's fastmath)."""
+    for x in range(dst.shape[0]):
+        dst[x] = dst[x] + ((c0[x] + oy * cy[x]) + ox * cx[x])
+
+
+@numba.njit(parallel=True, cache=True, nogil=True)  # no fastmath: the corrections' sums as numpy's
+def splat_all_views(disp, offsets, splat, reach, corr, out):  # pragma: no cover - compiled
     """The per-view disparities :func:`warp_all_views` samples with: ``disp`` forward-splatted
     into each view and its holes filled (in the rows where ``splat[u, v, y]``), or ``disp``
-    itself; warping with these as ``view_disp`` gives the same views, bit for bit.
+    itself; warping with these as ``view_disp`` gives the same views, bit for bit. With
+    ``corr`` (Depth-Net's refiner), each view's row then gets its correction
+    (:func:`lfstream.models.depth_net.view_correction`) while it is in cache.
 
     Args:
         disp: (H, W) float32 centre-view disparity.
         offsets: (U, V, 2) float32 displacement of each view per unit disparity.
         splat: (U, V, H) bool, the view rows to splat; reach: (U, V) int64 (:func:`warp_all_views`).
+        corr: (3, H, W) float32 correction maps ``c0, cy, cx``, or (0, H, W): none.
         out: (U, V, H, W) float32, overwritten.
     """
     h, w = disp.shape
@@ -531,8 +542,12 @@ def splat_all_views(disp, offsets, splat, reach, out):  # pragma: no cover - com
         dv = offsets[u, v, 1]
         dview = out[u, v]
         rows = splat[u, v]
+        correct = corr.shape[0] == 3
         if du == 0 and dv == 0 or not rows.any():
-            dview[:] = disp
+            for y in range(h):
+                dview[y] = disp[y]
+                if correct:
+                    _add_view_correction(dview[y], corr[0, y], corr[1, y], corr[2, y], du, dv)
             continue
         cols = np.arange(w).astype(np.float32)
         targets = np.empty(w, np.int32)
@@ -544,6 +559,8 @@ def splat_all_views(disp, offsets, splat, reach, out):  # pragma: no cover - com
                 _fill_holes(disp[y], dview[y], holes)
             else:
                 dview[y] = disp[y]
+            if correct:
+                _add_view_correction(dview[y], corr[0, y], corr[1, y], corr[2, y], du, dv)
 
 
 @numba.njit(**_EXACT)

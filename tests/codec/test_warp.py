@@ -350,6 +350,27 @@ def test_per_view_warp_of_the_view_disparities_is_the_warp(occlusion, rng):
         view_disparities(disp[None], (5, 3))
 
 
+@pytest.mark.parametrize("occlusion", [True, False])
+def test_view_disparities_add_the_refiners_corrections_as_it_does(occlusion, rng):
+    """With Depth-Net's correction maps, each view's map is the plain map plus
+    :func:`view_correction` at its offset, as numpy computes it in float32 (to the bit: the
+    kernel has no fused multiply-add), with view axes; a wrong shape is refused."""
+    from lfstream.models.depth_net import view_correction
+
+    _, disp = _scene(seed=4)
+    axes = np.array([[0.97, 0.11], [-0.06, 1.04]], np.float32)
+    corr = (0.3 * rng.standard_normal((3, *disp.shape))).astype(np.float32)
+    plain = view_disparities(disp, (5, 3), occlusion=occlusion, axes=axes)
+    offsets = view_offsets((5, 3), axes)
+    want = np.stack([[plain[u, v] + view_correction(corr, *offsets[u, v]) for v in range(3)] for u in range(5)])
+    assert want.dtype == np.float32
+    assert np.array_equal(view_disparities(disp, (5, 3), occlusion=occlusion, axes=axes, corrections=corr), want)
+    with pytest.raises(LFShapeError, match="corrections"):
+        view_disparities(disp, (5, 3), corrections=corr[:2])
+    with pytest.raises(LFValueError, match="corrections"):
+        view_disparities(disp, (5, 3), corrections=np.full_like(corr, np.nan))
+
+
 def test_warping_selected_views_gives_those_views_of_the_whole_warp():
     """warp_views_at (the encoder's check of its prediction) is warp_views restricted to some
     views: the same kernel, the same pixels, with gains and view axes."""
