@@ -20,8 +20,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-occlusion", action="store_true", help="warp without occlusion-aware per-view disparity")
     p.add_argument("--no-hance", action="store_true", help="skip JPEG-Hance (default: run it where it helps)")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto",
-                   help="JPEG-Hance: auto (by the stream's JPEG quality, measured threshold), on or off; with on, "
-                   "a stream encoded with --hance-map gets the network's correction by the encoder's strength map")
+                   help="JPEG-Hance: auto (by the stream's JPEG quality, measured threshold; on a stream encoded "
+                   "with --hance-map, always), on or off; a stream encoded with --hance-map gets the network's "
+                   "correction by the encoder's strength map")
     p.add_argument("--no-deblock", action="store_true",
                    help="skip the post-filter of JPEG centre views (default: on; a residual layer then is not applied)")
     p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")

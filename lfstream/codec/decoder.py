@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, Limits, Packet, StreamHeader, count_packets, iter_packets, read_header
+from lfstream.codec.hance import HANCE_MAP_PRESET
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
 from lfstream.codec.jpeg import blend_restored, hance_map, hance_strength, post_filter_jpeg
@@ -40,14 +41,12 @@ HANCE_MODES = ("auto", "on", "off")
 # +0.05..+0.50 at q70, -0.84..+0.34 at q90; on the decoded LF at q30/50/70 seahorse
 # +0.17/-0.07/-0.21 dB, cotton and lytro_translucent +0.04..+0.32 (bench/networks.py, 2026-11-24).
 HANCE_MAX_QUALITY = {"fast": 60, "paper": 70}
-#: The JPEG-Hance preset an encoder's strength map is measured for (``Encoder(hance_map=True)``);
-#: a decoder running another preset restores at full strength.
-HANCE_MAP_PRESET = "fast"
 #: Presets "auto" runs on a CUDA device only: on the 2-core CPU the fast network costs
 #: 84-107 ms a 375 x 540 view on the Zen 3 machine (two threads; 90 ms in its manifest entry),
 #: about twice the rest of a 7x7 decode (~45 ms); on the Zen 5 one 40-43 ms with its
 #: activations in place, still about three times the rest of the decode (~15 ms);
-#: ``hance="on"`` runs it anywhere.
+#: ``hance="on"`` runs it anywhere, and "auto" too on a stream with the encoder's strength maps
+#: (:data:`lfstream.codec.hance.HANCE_MAP_PRESET`), whose encoder measured where it helps.
 HANCE_AUTO_GPU_ONLY = ("fast",)
 #: Frames per network batch the decoder accepts.
 BATCH_RANGE = (1, 256)
@@ -89,8 +88,9 @@ class Decoder:
             ``"flat"`` or ``"net"`` (Depth-Net; its fast preset refines the depth hint).
         occlusion: occlusion-aware per-view disparity in the warp (hint mode).
         hance: ``"auto"`` (JPEG-Hance where it helps: a JPEG centre view at quality <=
-            HANCE_MAX_QUALITY[preset]),
-            ``"on"`` or ``"off"``.
+            HANCE_MAX_QUALITY[preset], on a CUDA device for :data:`HANCE_AUTO_GPU_ONLY`;
+            or, on any device, a stream with the encoder's strength maps for ``preset``,
+            ``Encoder(hance_map=True)``), ``"on"`` or ``"off"``.
         device: where the networks run (``"cpu"`` or ``"cuda"``); on a CUDA device a batch's
             frames are also warped there together (:attr:`warps_on_device`).
         preset: network preset whose shipped weights are used.
@@ -121,11 +121,11 @@ class Decoder:
             raise LFValueError("depth='hint': this stream carries no depth hint (encode with depth_hint=True)")
         # JPEG-Hance is trained on JPEG artefacts: "auto" never runs it on an AV1 centre view,
         # nor where a residual layer corrects the prediction without it
-        use_hance = self.hance == "on" or (self.hance == "auto" and self.header.codec == CODEC_JPEG
-                                           and not self.header.has_residual
-                                           and self.header.quality <= HANCE_MAX_QUALITY.get(self.preset, 0)
-                                           and (self.preset not in HANCE_AUTO_GPU_ONLY
-                                                or str(self.device).startswith("cuda")))
+        jpeg_alone = self.header.codec == CODEC_JPEG and not self.header.has_residual
+        use_hance = self.hance == "on" or (self.hance == "auto" and jpeg_alone and (
+            self.header.meta.get("hance_map") == self.preset  # the encoder measured where it helps
+            or (self.header.quality <= HANCE_MAX_QUALITY.get(self.preset, 0)
+                and (self.preset not in HANCE_AUTO_GPU_ONLY or str(self.device).startswith("cuda")))))
         self._hance = None
         if use_hance:  # torch is imported only when a network runs
             from lfstream.models.registry import load_model

@@ -180,6 +180,10 @@ class Encoder:
             meta["hint"] = self.hint_options.as_meta()
         if self.residual is not None:
             meta["residual"] = residual_meta(int(self.residual), self.residual_speed, self.residual_mode)
+        if self.hance_map:  # the network the maps are measured for: a decoder's hance "auto" runs it
+            from lfstream.codec.hance import HANCE_MAP_PRESET
+
+            meta["hance_map"] = HANCE_MAP_PRESET
         return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint,
                             codec=self.coding.codec_id, meta=meta, has_residual=self.residual is not None)
 
@@ -269,8 +273,8 @@ class Encoder:
         the frames between repeat it."""
         from dataclasses import replace
 
-        from lfstream.codec.decoder import HANCE_MAP_PRESET, Decoder
-        from lfstream.codec.hance import measure_hance_map
+        from lfstream.codec.decoder import Decoder
+        from lfstream.codec.hance import HANCE_MAP_PRESET, measure_hance_map
         from lfstream.codec.jpeg import with_hance_map
 
         frame = to_uint8(np.asarray(frame))

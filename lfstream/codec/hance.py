@@ -26,6 +26,11 @@ import numpy as np
 from lfstream.codec.jpeg import HANCE_LEVELS, MAX_HANCE_TILES, blend_restored
 from lfstream.errors import LFValueError
 
+#: The JPEG-Hance preset the encoder measures its maps for; a decoder running another preset
+#: restores at full strength. A stream with maps names it in its header (``meta["hance_map"]``),
+#: and a decoder's ``hance="auto"`` runs that preset's network on it: the encoder measured
+#: where it helps.
+HANCE_MAP_PRESET = "fast"
 #: Tiles a side of the map the encoder measures (fewer where the view has fewer pixels): 16,
 #: 96 bytes a frame; on lytro_translucent 8 x 8 tiles gained +0.102 dB, 16 x 16 +0.112.
 HANCE_MAP_TILES = 16

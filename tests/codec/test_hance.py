@@ -145,6 +145,21 @@ def test_the_encoder_sends_maps_that_do_not_lose_to_either_end(clip_lf):
     assert quality(with_map) >= max(quality(off), quality(on)) - 0.05
 
 
+def test_hance_auto_runs_the_network_on_streams_with_maps_only(clip_lf):
+    """A stream with the encoder's strength maps names their network in its header, and
+    ``hance="auto"`` decodes it as ``"on"`` on any device (the encoder measured where the
+    network helps); a stream without maps decodes as before (``"off"`` on the CPU for the
+    fast preset at this quality), also when a map is pasted into its JPEGs."""
+    mapped = lfstream.encode(clip_lf, quality=40, preset="fast", hance_map=True)
+    plain = lfstream.encode(clip_lf, quality=40, preset="fast")
+    assert split_stream(mapped)[0].meta["hance_map"] == "fast" and "hance_map" not in split_stream(plain)[0].meta
+    assert np.array_equal(lfstream.decode(mapped), lfstream.decode(mapped, hance="on"))
+    assert not np.array_equal(lfstream.decode(mapped), lfstream.decode(mapped, hance="off"))
+    assert np.array_equal(lfstream.decode(plain), lfstream.decode(plain, hance="off"))
+    pasted = _rewritten(plain, np.full((4, 4), 2, np.uint8))
+    assert np.array_equal(lfstream.decode(pasted), lfstream.decode(plain, hance="off"))
+
+
 def test_the_default_encode_marks_its_jpeg_frames_and_the_option_is_checked(clip_lf):
     lf = synth_clip(1, 7, (48, 64), seed=5).lf[0]
     header, packets = split_stream(lfstream.encode(lf, hance_map=True))
