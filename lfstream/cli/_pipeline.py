@@ -123,6 +123,7 @@ def _text(summary: dict, out: Path | None) -> str:
     if c:
         lines.append(f"  coding: {c['preset']} q{c['quality']}"
                      + coding_layers(c["depth_hint"], c["residual"], c["residual_mode"], c.get("hint_scale"))
+                     + (" + JPEG-Hance strength maps" if c.get("hance_map") else "")
                      + (f"; the prediction checked at {c['prediction_db']:.1f} dB" if c.get("prediction_db") is not None
                         else ""))
     if summary.get("refocus"):

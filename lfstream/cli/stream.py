@@ -34,6 +34,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--residual-mode", choices=RESIDUAL_MODES, default="prediction",
                    help="what the residual layer codes: prediction (the default), views (the views themselves) "
                    "or half-views (the views at half size)")
+    p.add_argument("--hance-map", action="store_true",
+                   help="send JPEG-Hance strength maps with the JPEG centre views (as encode --hance-map: the "
+                   "encoder decodes each frame and measures the map on key frames); --hance auto then runs the "
+                   "network, blended by them")
     p.add_argument("--frames", type=int_in((1, 1 << 20)), default=12, help="frames of the built-in clip")
     _pipeline.add_pipeline_options(p)
     add_read_options(p)
@@ -67,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
             raise
         cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp, depth_hint=not args.no_depth_hint,
                                         preset=args.preset, residual=args.residual,
-                                        residual_mode=args.residual_mode, transport=args.transport,
+                                        residual_mode=args.residual_mode, hance_map=args.hance_map,
+                                        transport=args.transport,
                                         fps=source.fps or 30.0)
         pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,

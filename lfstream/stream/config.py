@@ -60,6 +60,9 @@ class StreamConfig:
     residual: int | None = None
     # what the residual layer codes (lfstream.codec.residual.RESIDUAL_MODES)
     residual_mode: str = "prediction"
+    # JPEG-Hance strength maps with each JPEG centre view (Encoder.hance_map): the decoder's
+    # hance "auto" then runs the network, blended by them
+    hance_map: bool = False
     depth: str = "auto"
     hance: str = "auto"
     refocus: str = "auto"
@@ -89,7 +92,7 @@ class StreamConfig:
     def encoder(self) -> Encoder:
         """The encoder these fields describe (before rate control, which picks its own)."""
         return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset or DEFAULT_PRESET,
-                       residual=self.residual, residual_mode=self.residual_mode)
+                       residual=self.residual, residual_mode=self.residual_mode, hance_map=self.hance_map)
 
     def validate(self) -> None:
         """Raises :class:`LFValueError` naming the first field out of its range."""
@@ -103,6 +106,10 @@ class StreamConfig:
             if self.bpp is not None:
                 raise LFValueError("residual: rate control (bpp) chooses the residual layer itself; give one or the other")
         check_choice("residual_mode", self.residual_mode, RESIDUAL_MODES)
+        if self.hance_map:
+            if self.bpp is not None:
+                raise LFValueError("hance_map: not with rate control (bpp), whose configurations it does not measure")
+            self.encoder()  # refuses a coding the maps do not go with (an AV1 centre, a residual layer)
         if self.residual_mode != "prediction" and (self.residual is None or self.bpp is not None):
             raise LFValueError(f"residual_mode {self.residual_mode!r}: needs a residual quality (and no bpp)")
         if isinstance(self.alphas, str):

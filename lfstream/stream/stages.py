@@ -19,7 +19,7 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet
 from lfstream.codec.decoder import DecodedFrame, Decoder
-from lfstream.codec.encoder import Encoder
+from lfstream.codec.encoder import Encoder, with_default_hance_map
 from lfstream.codec.rate import choose_configuration, choose_default, uses_default_choice
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.lightfield import canonical_views
@@ -222,6 +222,8 @@ class EncoderStage(ConsumerStage):
             choice = choose_default(lf, self.config.quality, self.present, views_hint=True)
             self.encoder, first = choice.encoder, choice.first
             self.prediction_db = choice.prediction_db
+            if cfg.hance_map:
+                first = with_default_hance_map(self.encoder, first, lf, self.present)
         pixels = int(np.prod(lf.shape[:4]))
         if not self.started:
             self.channel.send_header(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
@@ -252,6 +254,7 @@ class EncoderStage(ConsumerStage):
         return {"preset": enc.preset, "quality": int(enc.quality), "depth_hint": bool(enc.depth_hint),
                 "hint_scale": int(enc.hint_options.hint_scale) if enc.depth_hint else None,
                 "residual": enc.residual, "residual_mode": enc.residual_mode if enc.residual is not None else None,
+                "hance_map": bool(enc.hance_map),
                 "prediction_db": None if self.prediction_db is None else round(float(self.prediction_db), 3)}
 
     def forward(self, packet: Packet) -> bool:

@@ -46,7 +46,8 @@ def test_transports_agree_and_outputs_are_valid(tmp_path, transport):
     # what the default chose for a 5x5 grid of 48x64 views: an AV1 centre; too few hint
     # cells for the check of its prediction (lfstream.codec.rate.choose_default)
     assert summary["coding"] == {"preset": "balanced", "quality": 50, "depth_hint": True, "hint_scale": 4,
-                                 "residual": None, "residual_mode": None, "prediction_db": None}
+                                 "residual": None, "residual_mode": None, "hance_map": False,
+                                 "prediction_db": None}
     # the summary's figures are consistent with what was streamed, not merely present
     assert summary["fps"] == pytest.approx(summary["frames"] / summary["wall_s"], rel=0.01)
     assert summary["mssim_frames"] == [0, 1, 2, 3] and 0.5 < summary["mssim"] <= 1
@@ -431,6 +432,34 @@ def test_the_warm_up_decodes_on_the_streams_device(monkeypatch):
     with pytest.raises(Stop):
         warm_kernels(config)
     assert seen["device"] == "cuda:7" and seen["hance"] == "off"
+
+
+def test_a_stream_with_strength_maps_sends_them_and_its_decoder_runs_the_network(tmp_path):
+    """``stream --hance-map``: every packet's JPEG carries the encoder's map, the header names
+    its network, the summary says so, and the stream's decoder (``hance`` auto) decodes what
+    ``lfstream.decode`` of the stream file decodes with ``hance="on"`` (the summary's MPSNR,
+    to 1e-6 dB), not ``"off"``; refused with rate control or a coding the maps do not go with."""
+    import lfstream
+    from lfstream.codec.bitstream import split_stream
+    from lfstream.codec.jpeg import hance_map
+    from lfstream.metrics import mpsnr
+
+    frames = list(synthetic_source(frames=2, views=7, size=(48, 64), seed=6, cache=False))
+    config = StreamConfig(refocus="sas", save=(), hance_map=True, mssim_every=0, transport="file")
+    summary = Pipeline(iter(frames), config, None, stream_file=tmp_path / "stream.lfs").run()
+    assert summary["frames"] == 2 and summary["coding"]["hance_map"] is True
+    data = (tmp_path / "stream.lfs").read_bytes()
+    header, packets = split_stream(data)
+    assert header.meta["hance_map"] == "fast" and all(hance_map(p.image) is not None for p in packets)
+
+    def mean_mpsnr(hance):
+        return float(np.mean([mpsnr(f, d) for f, d in zip(frames, lfstream.decode(data, hance=hance))]))
+
+    assert summary["mpsnr"] == pytest.approx(mean_mpsnr("on"), abs=1e-6)
+    assert abs(mean_mpsnr("on") - mean_mpsnr("off")) > 1e-3
+    for bad in ({"bpp": 0.02}, {"preset": "balanced"}, {"residual": 40}):
+        with pytest.raises(LFStreamError, match="hance_map"):
+            StreamConfig(hance_map=True, **bad).validate()
 
 
 def test_the_warm_up_runs_the_networks_the_streams_decoder_runs(monkeypatch):
