@@ -224,13 +224,26 @@ class Decoder:
         packet's hint is still read, so later delta hints can refer to it). A residual layer
         is added too: with a reused disparity the result differs from a full decode by what
         the two predictions differ (the stream's static skip audits that)."""
-        axes = self._last_axes
+        return self._add_residual(packet, self._warp(packet, centre, disparity, self._read_hint(packet)))
+
+    def follow(self, packet: Packet) -> None:
+        """Reads ``packet``'s hint and gain maps into this decoder's references without
+        reconstructing its frame, so that the deltas of the packets after it resolve as after
+        a full decode (the encoder's strength map follows its own stream this way between the
+        frames it measures: a JPEG centre without a residual layer, whose views are all the
+        state a packet leaves besides these)."""
+        self._read_hint(packet)
+        self._gains(packet)
+
+    def _read_hint(self, packet: Packet) -> np.ndarray | None:
+        """Parses the packet's hint (remembered for later deltas) where the frames get a
+        disparity; the view axes it names, else the last ones."""
         if packet.hint and self.estimates_depth:
             try:
-                axes = self._last_axes = self._hints.parse(packet.hint, self.header.size, packet.seq).axes
+                self._last_axes = self._hints.parse(packet.hint, self.header.size, packet.seq).axes
             except HintReferenceError:
                 self.hint_fallbacks += 1
-        return self._add_residual(packet, self._warp(packet, centre, disparity, axes))
+        return self._last_axes
 
     @staticmethod
     def _views_only(packet: Packet) -> bool:

@@ -145,6 +145,30 @@ def test_the_encoder_sends_maps_that_do_not_lose_to_either_end(clip_lf):
     assert quality(with_map) >= max(quality(off), quality(on)) - 0.05
 
 
+def test_a_decoder_that_follows_packets_decodes_the_next_as_a_full_decoder_does(clip_lf):
+    """``Decoder.follow`` (how the encoder's map keeps up with its stream between the frames
+    it measures) reads a packet's hint and gains only: a decoder that followed frames 0..k-1
+    decodes frame k as one that decoded them all (delta hints and delta gains included),
+    and a stream with maps re-measured every other frame is the same either way (bytes)."""
+    from lfstream.codec.decoder import Decoder
+    from lfstream.codec.hint import HintOptions
+
+    lf = synth_clip(4, 7, (48, 64), seed=8, motion=0.5, camera_pan=0.2, vignetting=0.3).lf
+    data = lfstream.encode(lf, quality=40, preset="fast")
+    header, packets = split_stream(data)
+    assert all(p.hint for p in packets) and all(p.gain for p in packets)
+    full = Decoder(header, hance="off")
+    frames = [full.decode_packet(p).lf for p in packets]
+    for k in range(1, len(packets)):
+        follower = Decoder(header, hance="off")
+        for p in packets[:k]:
+            follower.follow(p)
+        assert np.array_equal(follower.decode_packet(packets[k]).lf, frames[k]), k
+    every_other = lfstream.encode(lf, quality=40, preset="fast", hance_map=True, hint_options=HintOptions(key_interval=2))
+    maps = [hance_map(p.image) for p in split_stream(every_other)[1]]
+    assert np.array_equal(maps[0], maps[1]) and np.array_equal(maps[2], maps[3])
+
+
 def test_hance_auto_runs_the_network_on_streams_with_maps_only(clip_lf):
     """A stream with the encoder's strength maps names their network in its header, and
     ``hance="auto"`` decodes it as ``"on"`` on any device (the encoder measured where the
