@@ -72,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
     residual, residual_mode = args.residual, args.residual_mode
     prediction_db = None  # the default's check of its own prediction (rate.choose_default)
+    hance_mapped = False  # strength maps sent (not where the default codes the views themselves)
     hint_scale = HintOptions().hint_scale  # the hint's resolution divisor (the default may double it)
     if args.bpp is not None and (residual is not None or residual_mode != "prediction"):
         raise LFValueError("--residual: rate control (--bpp) chooses the residual layer itself; give one or the other")
@@ -98,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         enc, first = choice.encoder, choice.first
         if args.hance_map:
             first = with_default_hance_map(enc, first, source.first, present)
+        hance_mapped = enc.hance_map
         first_s = time.perf_counter() - t0
         preset, depth_hint, residual, residual_mode = enc.preset, enc.depth_hint, enc.residual, enc.residual_mode
         stats = encode_file(frames, args.output, views, size, enc, fps=fps, present=present, first=first)
@@ -109,13 +111,14 @@ def run(args: argparse.Namespace) -> int:
                             Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
                                     residual_mode=residual_mode, device=args.device, hance_map=args.hance_map), fps=fps,
                             present=present)
+        hance_mapped = args.hance_map
     shape = (stats.frames, *source.first.shape)  # a video read frame by frame: as many as were encoded
     result = dataclasses.asdict(stats)
     result.update({"output": str(args.output), "bpp": bpp(stats.bytes, shape),
                    "hint_bpp": bpp(stats.hint_bytes, shape), "quality": quality, "depth_hint": depth_hint,
                    "hint_scale": hint_scale if depth_hint else None,
                    "preset": preset, "residual": residual, "residual_mode": residual_mode if residual is not None else None,
-                   "residual_bpp": bpp(stats.residual_bytes, shape)})
+                   "residual_bpp": bpp(stats.residual_bytes, shape), "hance_map": bool(hance_mapped)})
     if prediction_db is not None:
         result["prediction_db"] = prediction_db
     if rate is not None:

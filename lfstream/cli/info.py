@@ -108,7 +108,8 @@ def _text(info: dict) -> str:
             lines.append(f"  axes    the views move along {s['view_axes']} (rows dy, dx; the convention: identity)")
         if s.get("hance_map"):
             rows, cols = s["hance_map"]
-            lines.append(f"  hance   a JPEG-Hance strength map of {rows} x {cols} tiles (decode with --hance on to use it)")
+            lines.append(f"  hance   a JPEG-Hance strength map of {rows} x {cols} tiles "
+                         "(decode --hance auto, the default, or on uses it)")
     return "\n".join(lines)
 
 

@@ -594,7 +594,7 @@ def test_encode_hance_map_sends_strength_maps_and_refuses_rate_control(capsys, t
     np.save(tmp_path / "lf.npy", lf)
     code, out, _ = run(capsys, "encode", tmp_path / "lf.npy", "-o", tmp_path / "a.lfs", "--preset", "fast",
                        "--hance-map", "--json")
-    assert code == 0 and json.loads(out)["frames"] == 2
+    assert code == 0 and json.loads(out)["frames"] == 2 and json.loads(out)["hance_map"] is True
     data = (tmp_path / "a.lfs").read_bytes()
     assert all(hance_map(p.image) is not None for p in split_stream(data)[1])
     assert data == lfstream.encode(lf, preset="fast", hance_map=True)  # the CLI writes what the library makes
@@ -602,7 +602,8 @@ def test_encode_hance_map_sends_strength_maps_and_refuses_rate_control(capsys, t
     assert code == 0 and json.loads(out)["stream"]["hance_map"] == [16, 16]
     code, out, _ = run(capsys, "info", tmp_path / "a.lfs")
     assert "strength map of 16 x 16 tiles" in out
-    (tmp_path / "plain.lfs").write_bytes(lfstream.encode(lf, preset="fast"))
+    code, out, _ = run(capsys, "encode", tmp_path / "lf.npy", "-o", tmp_path / "plain.lfs", "--preset", "fast", "--json")
+    assert code == 0 and json.loads(out)["hance_map"] is False
     code, out, _ = run(capsys, "info", tmp_path / "plain.lfs", "--json")
     assert code == 0 and json.loads(out)["stream"]["hance_map"] is None
     code, _, err = run(capsys, "encode", tmp_path / "lf.npy", "-o", tmp_path / "b.lfs", "--bpp", "0.05", "--hance-map")
