@@ -14,9 +14,11 @@ Measured with the shipped weights, the fast preset's encode at q50, on the three
 network was not trained on, the decoded LF with the map against the post-filter alone:
 seahorse +0.212 dB, cotton +0.315, lytro_translucent +0.112, MSSIM higher on each (the full
 correction: -0.069 / +0.309 / +0.077 dB; 8 x 8 tiles +0.198 / +0.311 / +0.102). Costs the
-encoder a decode of every frame, and the network and a warp per level on the frames it
-measures (the first and every hint key frame): an option (``Encoder(hance_map=True)``,
-``lfstream encode --hance-map``), not the default.
+encoder the hint and gains of every frame (its reference decoder follows the stream), and a
+decode, the network and a warp per level on the frames it measures (the first and every hint
+key frame): an option (``Encoder(hance_map=True)``, ``lfstream encode --hance-map``,
+``lfstream stream --hance-map``), not the default. A stream with maps names the network in
+its header, and a decoder's ``hance="auto"`` runs it there on any device.
 """
 
 from __future__ import annotations

@@ -15,9 +15,10 @@ Skips (each switchable, each reported in the summary with what it saved and cost
       outside the scene's disparity range
       (1st..99th percentile of the decoded disparity, widened by ``plane_margin``) are
       rendered by a cheap path (shift-and-sum at half resolution, upsampled) and flagged;
-  (c) JPEG-Hance runs only at JPEG qualities where it was measured to help (the decoder's
-      ``hance="auto"``: the paper preset up to q70; elsewhere the classical post-filter
-      :func:`lfstream.codec.jpeg.deblock_jpeg` measured better);
+  (c) JPEG-Hance runs only where it was measured to help (the decoder's ``hance="auto"``:
+      at JPEG qualities up to a preset's threshold, the fast preset on a CUDA device only;
+      on any device, a stream with the encoder's strength maps, ``hance_map``, blended by
+      them; elsewhere the classical post-filter :func:`lfstream.codec.jpeg.deblock_jpeg`);
   (d) rendering the focal stack straight from centre view + disparity is not offered: each
       plane would need one scattered (gathered) sample of the centre per view and pixel,
       13 x 49 per pixel for the default planes of a 7x7 grid (~130 M scalar gathers, over a
