@@ -35,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lfstream.codec.bitstream import count_packets, read_header
-    from lfstream.codec.decoder import _stacked, _video_array, iter_decode
+    from lfstream.codec.decoder import frames_array, iter_decode, video_array
     from lfstream.errors import BitstreamError, LFFileError
     from lfstream.io import FrameWriter, write_lf, write_pfm
     from lfstream.io._fs import check_new_file
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
             fps = header.fps
             if args.output.suffix.lower() in (".npy", ".npz"):
                 expected = count_packets(fh, header)[0]  # the frames up to any damage
-                video = None if by_frame else _video_array(header, expected)
+                video = None if by_frame else video_array(header, expected)
             fh.seek(0)
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     if writer is not None:
         writer.close(partial=error is not None)
     elif frames:
-        write_lf(args.output, _stacked(frames, video), overwrite=args.overwrite)
+        write_lf(args.output, frames_array(frames, video), overwrite=args.overwrite)
     if error is not None:
         done = (f"{count} complete frame(s) before it written to {args.output}" if count
                 else "no complete frame, nothing written")

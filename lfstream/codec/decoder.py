@@ -494,7 +494,7 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
     """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8 (``deblock``: :attr:`Decoder.deblock`).
 
     The frames are decoded into one array sized by the packets counted first
-    (:func:`_video_array`), not decoded apart and then stacked: the built-in clip's 12
+    (:func:`video_array`), not decoded apart and then stacked: the built-in clip's 12
     frames of 7x7x375x540 decoded in 15.9 ms a frame instead of 18.5-19.0, with a peak of
     536 MB instead of 877-1015 (the stack copied every frame into fresh pages).
 
@@ -507,7 +507,7 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
     buf = io.BytesIO(bytes(data))
     try:
         header = read_header(buf, limits)
-        out = _video_array(header, count_packets(buf, header, limits)[0])
+        out = video_array(header, count_packets(buf, header, limits)[0])
     except BitstreamError:  # a damaged header: the decode below names it
         out = None
     buf.seek(0)
@@ -516,11 +516,11 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
         for f in iter_decode(buf, depth, occlusion, limits, hance=hance, device=device, deblock=deblock, out=out):
             frames.append(f.lf)
     except BitstreamError as exc:
-        exc.partial = _stacked(frames, out) if frames else None  # type: ignore[attr-defined]
+        exc.partial = frames_array(frames, out) if frames else None  # type: ignore[attr-defined]
         raise
     if not frames:
         raise BitstreamError("stream holds no frames")
-    return _stacked(frames, out)
+    return frames_array(frames, out)
 
 
 #: The most of the machine's memory :func:`decode` reserves up front for the frames it
@@ -528,7 +528,7 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
 VIDEO_ARRAY_MEMORY_SHARE = 0.5
 
 
-def _video_array(header: StreamHeader, count: int, max_frames: int | None = None) -> np.ndarray | None:
+def video_array(header: StreamHeader, count: int, max_frames: int | None = None) -> np.ndarray | None:
     """The ``(T, U, V, H, W, 3)`` array for the ``count`` complete packets of a stream with
     ``header`` (:func:`lfstream.codec.bitstream.count_packets`; at most ``max_frames``), or
     ``None`` where there are none or they would take more than
@@ -548,9 +548,10 @@ def _video_array(header: StreamHeader, count: int, max_frames: int | None = None
     return np.empty((count, u, v, h, w, 3), np.uint8)
 
 
-def _stacked(frames: list[np.ndarray], out: np.ndarray | None) -> np.ndarray:
-    """The decoded frames as one array: the first ``len(frames)`` of ``out`` where they were
-    decoded into it, else stacked (:func:`stack_frames`)."""
+def frames_array(frames: list[np.ndarray], out: np.ndarray | None) -> np.ndarray:
+    """The decoded frames as one array: the first ``len(frames)`` of ``out`` (a
+    :func:`video_array` they were decoded into, :func:`iter_decode`'s ``out``) where they
+    are its frames, else stacked (:func:`stack_frames`)."""
     if out is not None and len(frames) <= len(out) and all(
             f.shape == out.shape[1:] and f.ctypes.data == out[k].ctypes.data for k, f in enumerate(frames)):
         return out[: len(frames)]
@@ -563,13 +564,13 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
     path = Path(path)
     with _errors_naming(path), open(path, "rb") as fh:
         header = read_header(fh)
-        out = _video_array(header, count_packets(fh, header)[0], max_frames)
+        out = video_array(header, count_packets(fh, header)[0], max_frames)
         fh.seek(0)
         frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device,
                                             out=out)]
     if not frames:
         raise BitstreamError(f"{path}: stream holds no frames")
-    return _stacked(frames, out), header.fps
+    return frames_array(frames, out), header.fps
 
 
 def lfs_frames(path: str | os.PathLike, max_frames: int | None = None
@@ -617,4 +618,5 @@ def _errors_naming(path: str | os.PathLike) -> Iterator[None]:
 
 
 __all__ = ["DEPTH_MODES", "HANCE_MODES", "HANCE_MAX_QUALITY", "BATCH_RANGE", "BESIDE_MIN_BITS", "Decoder",
-           "DecodedFrame", "decode", "iter_decode", "decode_file", "lfs_frames"]
+           "DecodedFrame", "decode", "iter_decode", "decode_file", "lfs_frames", "stack_frames", "video_array",
+           "frames_array", "VIDEO_ARRAY_MEMORY_SHARE"]
