@@ -44,9 +44,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       help="send only the JPEG centre view (fewest bits, flat reconstruction)")
     p.add_argument("--hance-map", action="store_true",
                    help="send a JPEG-Hance strength map with each JPEG centre view, measured by the encoder on "
-                   "the decoded light field (a decode of every frame, and the network and a warp per strength on "
-                   "key frames: about 0.2 s a 7x7x375x540 key frame on a 2-core CPU); decoding with --hance auto "
-                   "(the default) or on then blends the network's correction by it")
+                   "the decoded light field (on key frames a decode, the network and a warp per strength: about "
+                   "0.15 s a 7x7x375x540 key frame on a 2-core CPU; a few ms the frames between); decoding with "
+                   "--hance auto (the default) or on then blends the network's correction by it")
     p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate to record (default: the input's, else 30)")
     p.add_argument("--device", default="cpu", help="where the hint's plane sweep runs: cpu (the default) or cuda "
                    "(rate control, --bpp, sweeps on the cpu)")

@@ -295,7 +295,7 @@ class Encoder:
             restored = restore_images(decoded.centre[None], self._hance_model)[0]
             self._hance_levels = measure_hance_map(frame, decoded.centre, restored, decoded.disparity, decoded.axes,
                                                    decoded.gains, present,
-                                                   occlusion=self._hance_reference.occlusion)
+                                                   occlusion=self._hance_reference.occlusion, warped=decoded.lf)
             self._hance_age = 0
         self._hance_age += 1
         self.last_hance_map = self._hance_levels

@@ -46,7 +46,7 @@ def tile_edges(n: int, tiles: int) -> np.ndarray:
 def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarray, disparity: np.ndarray,
                       axes: np.ndarray | None = None, gains: np.ndarray | None = None,
                       present: np.ndarray | None = None, tiles: int = HANCE_MAP_TILES,
-                      occlusion: bool = True) -> np.ndarray:
+                      occlusion: bool = True, warped: np.ndarray | None = None) -> np.ndarray:
     """Per tile of the centre view, the strength level (0..:data:`HANCE_LEVELS`) whose warp
     comes closest to the original ``views``: the centre blended at each level
     (:func:`lfstream.codec.jpeg.blend_restored`) and warped as the decoder warps it
@@ -60,6 +60,8 @@ def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarra
         disparity: the decoder's centre-view disparity; axes, gains: the decoder's.
         present: ``(U, V)`` views that exist; ``None``: all.
         tiles: tiles a side (at most :data:`lfstream.codec.jpeg.MAX_HANCE_TILES`).
+        warped: level 0's warp (``centre`` itself, warped as above) where the caller has it:
+            the decoder's light field (the encoder's reference decode), one warp saved.
 
     Shape:
         - views: ``(U, V, H, W, 3)``; centre, restored: ``(H, W, 3)``; disparity: ``(H, W)``
@@ -79,10 +81,15 @@ def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarra
     errors = np.empty((HANCE_LEVELS + 1, len(rows) - 1, len(cols) - 1), np.int64)
     lf = np.empty(views.shape, np.uint8)
     err = np.empty((h, w), np.int64)
+    if warped is not None and warped.shape != views.shape:
+        raise LFValueError(f"warped: {views.shape} like the views, got {warped.shape}")
     for level in range(HANCE_LEVELS + 1):
-        blended = blend_restored(centre, restored, level / HANCE_LEVELS)
-        warp_views(blended, disparity, (u, v), occlusion=occlusion, gains=gains, axes=axes, out=lf)
-        squared_error_map(lf, original, mask, err)  # over the views present and the channels
+        if level == 0 and warped is not None:  # blend_restored at 0 is the centre exactly
+            squared_error_map(np.ascontiguousarray(warped), original, mask, err)
+        else:
+            blended = blend_restored(centre, restored, level / HANCE_LEVELS)
+            warp_views(blended, disparity, (u, v), occlusion=occlusion, gains=gains, axes=axes, out=lf)
+            squared_error_map(lf, original, mask, err)  # over the views present and the channels
         errors[level] = np.add.reduceat(np.add.reduceat(err, rows[:-1], axis=0), cols[:-1], axis=1)
     return errors.argmin(axis=0).astype(np.uint8)
 

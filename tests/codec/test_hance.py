@@ -97,6 +97,14 @@ def test_the_measurement_keeps_the_level_whose_warp_is_closest_per_tile():
     assert list(tile_edges(10, 3)) == [0, 3, 7, 10]
     with pytest.raises(LFValueError, match="tiles"):
         measure_hance_map(views, blurred, restored, d, tiles=0)
+    # level 0's warp given (the encoder's reference decode): the same map; a wrong one counts
+    from lfstream.codec.warp import warp_views
+
+    plain = warp_views(blurred, d, (3, 3))
+    assert np.array_equal(measure_hance_map(views, blurred, restored, d, tiles=4, warped=plain), levels)
+    assert not np.array_equal(measure_hance_map(views, blurred, restored, d, tiles=4, warped=views), levels)
+    with pytest.raises(LFValueError, match="warped"):
+        measure_hance_map(views, blurred, restored, d, tiles=4, warped=plain[:2])
 
 
 @pytest.fixture(scope="module")
