@@ -112,6 +112,32 @@ def test_untrained_hance_is_identity_and_function_matches_module():
         jpeg_hance(torch.rand(4, 8, 8), model)
 
 
+@pytest.mark.parametrize("preset", ["fast", "paper"])
+def test_hance_in_strips_is_the_whole_forward_pass(preset, monkeypatch, rng):
+    """restore_images on the CPU runs row strips with their receptive field's context rows:
+    the bytes of the whole image's forward pass (exact here; a level on at most 1e-4 of the
+    samples allowed for another CPU's kernels), also with strips of 8 rows, a batch, a
+    height that is not a multiple of the strip, and an image shorter than the context."""
+    import lfstream.models.jpeg_hance as jh
+    from lfstream.lightfield import to_network_input
+
+    model = load_model("jpeg_hance", preset, "cpu")
+
+    def whole(images):
+        with torch.inference_mode():
+            y = model(to_network_input(images)).mul_(255.0).add_(0.5).clamp_(0, 255).to(torch.uint8)
+        return y.permute(0, 2, 3, 1).numpy()
+
+    tall = rng.integers(0, 256, (2, 61, 37, 3), dtype=np.uint8)
+    short = np.ascontiguousarray(tall[1:, :5])
+    wants = [whole(tall), whole(short)]
+    for budget in (1, 40_000, 10 << 20):  # rows 8 (the least), a few strips, the whole image
+        monkeypatch.setattr(jh, "HANCE_STRIP_BYTES", budget)
+        for images, want in zip((tall, short), wants):
+            diff = np.abs(restore_images(images, model).astype(np.int16) - want)
+            assert diff.max() <= 1 and (diff > 0).mean() <= 1e-4, budget
+
+
 @pytest.mark.parametrize("size", [(1, 1), (7, 33), (40, 64)])
 def test_depth_refiner_any_size_and_finite_on_constant_images(size):
     torch.manual_seed(0)
