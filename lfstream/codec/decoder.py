@@ -43,8 +43,8 @@ HANCE_MODES = ("auto", "on", "off")
 HANCE_MAX_QUALITY = {"fast": 60, "paper": 70}
 #: Presets "auto" runs on a CUDA device only: on the 2-core CPU the fast network costs
 #: 84-107 ms a 375 x 540 view on the Zen 3 machine (two threads; 90 ms in its manifest entry),
-#: about twice the rest of a 7x7 decode (~45 ms); on the Zen 5 one 40-43 ms with its
-#: activations in place, still about three times the rest of the decode (~15 ms);
+#: about twice the rest of a 7x7 decode (~45 ms); on the Zen 5 one 27-35 ms (its activations
+#: in place, the view in row strips), still about twice the rest of the decode (~15 ms);
 #: ``hance="on"`` runs it anywhere, and "auto" too on a stream with the encoder's strength maps
 #: (:data:`lfstream.codec.hance.HANCE_MAP_PRESET`), whose encoder measured where it helps.
 HANCE_AUTO_GPU_ONLY = ("fast",)
