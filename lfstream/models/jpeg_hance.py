@@ -105,8 +105,10 @@ def jpeg_hance(image: torch.Tensor, model: JPEGHance) -> torch.Tensor:
 
 #: On the CPU, JPEG-Hance runs on row strips whose widest activation takes at most this many
 #: bytes (:func:`restore_images`): the whole 375 x 540 view's activations (24 channels, 19 MB
-#: each) were fresh pages from the kernel at every layer, faulted in and zeroed, so the
-#: network took 46 ms where its strips take 28.5 (the same bytes; 2-core Zen 5).
+#: each, four or five alive at once) were fresh pages from the kernel at every layer, faulted
+#: in and zeroed, where glibc trims its heap above twice its (dynamic) mmap threshold; in a
+#: process that has freed light-field-sized arrays (a decoder's) the strips' smaller ones are
+#: reused: 46 -> 28 ms (the same bytes; 2-core Zen 5). In a fresh process, the same time.
 HANCE_STRIP_BYTES = 10 << 20
 
 
