@@ -169,6 +169,7 @@ class Decoder:
 
     @property
     def uses_depth_net(self) -> bool:
+        """Whether frames get Depth-Net's per-view disparities (``depth="net"``)."""
         return self._depth_net is not None
 
     @property
