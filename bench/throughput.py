@@ -8,7 +8,8 @@
    metrics), frames/s, and a batch-size sweep of the Depth-Net decoder.
 3. The main command: ``lfstream stream`` with no arguments (built-in clip, every output,
    metrics), run --runs times in this process; frames/s of the whole run (kernels warmed
-   before the clock, as the command does), against the target of 5.
+   before the clock, as the command does), against the target of 5; then the same with
+   both networks (``--hance on --depth net``, the networks issue's row), same target.
 4. Run time against error on the seahorse sample: every decoder configuration as a point
    (decode ms/frame, MPSNR), the Pareto front, and the default marked (PNG in bench/results).
 
@@ -129,8 +130,9 @@ def plot(points: list[dict], path) -> None:
 STREAM_TARGET_FPS = 5.0
 
 
-def main_command(runs: int, frames: int | None = None) -> dict:
-    """``lfstream stream`` as a user runs it (into a temporary folder); median frames/s."""
+def main_command(runs: int, frames: int | None = None, flags: tuple[str, ...] = ()) -> dict:
+    """``lfstream stream`` as a user runs it (into a temporary folder), with ``flags``; median
+    frames/s."""
     import contextlib
     import io
     import json
@@ -142,7 +144,7 @@ def main_command(runs: int, frames: int | None = None) -> dict:
     fps, last = [], {}
     for _ in range(runs):
         with tempfile.TemporaryDirectory() as tmp:
-            argv = ["stream", "-o", str(Path(tmp) / "out"), "--json"] + (["--frames", str(frames)] if frames else [])
+            argv = ["stream", "-o", str(Path(tmp) / "out"), "--json", *flags] + (["--frames", str(frames)] if frames else [])
             buf = io.StringIO()
             with contextlib.redirect_stdout(buf):
                 code = cli(argv)
@@ -150,11 +152,12 @@ def main_command(runs: int, frames: int | None = None) -> dict:
                 raise SystemExit(f"lfstream stream failed with status {code}")
             last = json.loads(buf.getvalue()[buf.getvalue().index("{"):])
             fps.append(last["fps"])
-    row = {"lf": "built-in clip", "stage": "lfstream stream (main command)", "fps_runs": fps,
+    what = "lfstream stream" + "".join(f" {f}" for f in flags)
+    row = {"lf": "built-in clip", "stage": f"{what} (main command)", "flags": list(flags), "fps_runs": fps,
            "fps_median": float(np.median(fps)), "target_fps": STREAM_TARGET_FPS,
            "ratio_to_target": float(np.median(fps)) / STREAM_TARGET_FPS, "warmup_s": last.get("warmup_s"),
            "stages": last.get("stages")}
-    print(f"lfstream stream: {' '.join(f'{f:.2f}' for f in fps)} frames/s (median {row['fps_median']:.2f}; "
+    print(f"{what}: {' '.join(f'{f:.2f}' for f in fps)} frames/s (median {row['fps_median']:.2f}; "
           f"{row['ratio_to_target']:.2f}x the target of {STREAM_TARGET_FPS:g})")
     return row
 
@@ -175,6 +178,8 @@ def main(argv=None) -> dict:
     for b in ((1, 4) if not args.quick else (2,)):
         results.append(end_to_end(7, e2e_size, frames, b if b > 1 else 2, True, args.device))
     results.append(main_command(runs, frames=3 if args.quick else None))
+    # the networks issue's row: Depth-Net and JPEG-Hance in the stream, against the same target
+    results.append(main_command(runs, frames=3 if args.quick else None, flags=("--hance", "on", "--depth", "net")))
     results += pareto(runs, args.device)
     return emit(args, results)
 
