@@ -467,7 +467,8 @@ def _warp_beside(beside: Future, ranked: np.ndarray, warp) -> int:
 
 
 def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: bool = True,
-                     axes: np.ndarray | None = None, corrections: np.ndarray | None = None) -> np.ndarray:
+                     axes: np.ndarray | None = None, corrections: np.ndarray | None = None,
+                     out: np.ndarray | None = None) -> np.ndarray:
     """The per-view disparity maps :func:`warp_views` samples each view with: the centre map
     forward-splatted into the view, holes filled from the background side (see the module
     docstring; only in the rows where it can matter, :func:`splat_rows`), or the centre map itself
@@ -483,6 +484,9 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
             each view's map as :func:`lfstream.models.depth_net.view_correction` computes
             them (float32, the same values to the bit), in the same pass: 6 ms a 7x7x375x540
             frame against 5 for the plain maps and 12 more for 49 numpy sums after them.
+        out: a ``(U, V, H, W)`` float32 C-contiguous array to write the maps into (a
+            decoder's, reused from frame to frame: 40 MB of fresh pages a 7x7x375x540 frame
+            otherwise, 6-12 ms to fault in and more where the kernel compacts huge pages).
 
     Shape:
         - output: ``(U, V, H, W)`` float32
@@ -501,7 +505,11 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
         check_finite(corr, "corrections")
     from lfstream.codec._kernels import splat_all_views
 
-    out = np.empty((u, v, *d.shape), np.float32)
+    if out is None:
+        out = np.empty((u, v, *d.shape), np.float32)
+    elif out.shape != (u, v, *d.shape) or out.dtype != np.float32 or not out.flags.c_contiguous:
+        raise LFShapeError(f"out: a C-contiguous float32 array of shape {(u, v, *d.shape)}, got "
+                           f"{out.dtype} {tuple(out.shape)}")
     offsets = view_offsets((u, v), axes)
     splat_all_views(read_only(d), offsets, *_occlusion_plan(d, offsets, occlusion), read_only(corr), out)
     return out

@@ -271,12 +271,14 @@ def grid_disparities(maps: torch.Tensor | np.ndarray, views: tuple[int, int]):
 @torch.inference_mode()
 def predict_view_disparities(centres: np.ndarray, model: nn.Module, views: tuple[int, int],
                              hints: np.ndarray | None = None, device: str | torch.device = "cpu",
-                             axes: list[np.ndarray | None] | None = None) -> np.ndarray:
+                             axes: list[np.ndarray | None] | None = None,
+                             out: np.ndarray | None = None) -> np.ndarray:
     """Per-view disparities of a batch of decoded centre views, on the stream's view grid.
 
     A :class:`DepthRefiner` corrects the per-view maps the decoder's warp derives from each
-    hint (with that frame's view ``axes``); a :class:`DepthNet` predicts them on its own grid
-    (:func:`grid_disparities`).
+    hint (with that frame's view ``axes``), into ``out`` where given (a C-contiguous float32
+    array of at least ``B`` frames: the first ``B`` are returned); a :class:`DepthNet`
+    predicts them on its own grid (:func:`grid_disparities`).
 
     Shape:
         - centres: ``(B, H, W, 3)`` uint8; hints: ``(B, H, W)`` float32 (when the model takes one)
@@ -298,8 +300,14 @@ def predict_view_disparities(centres: np.ndarray, model: nn.Module, views: tuple
         corr = model.corrections(x, h).float().cpu().numpy()
         # DepthRefiner.apply in the kernel that splats the hint's maps, row by row (the same
         # values; 49 numpy sums afterwards took 12 ms at 7x7x375x540)
-        out = [view_disparities(hints[k], views, axes=a, corrections=c) for k, (c, a) in enumerate(zip(corr, axes))]
-        return out[0][None] if len(out) == 1 else np.stack(out)
+        if out is not None:
+            if len(out) < len(corr):
+                raise LFShapeError(f"out: room for {len(out)} frames, the batch has {len(corr)}")
+            for k, (c, a) in enumerate(zip(corr, axes)):
+                view_disparities(hints[k], views, axes=a, corrections=c, out=out[k])
+            return out[: len(corr)]
+        maps = [view_disparities(hints[k], views, axes=a, corrections=c) for k, (c, a) in enumerate(zip(corr, axes))]
+        return maps[0][None] if len(maps) == 1 else np.stack(maps)
     maps = model(x, h).float().cpu().numpy()
     return np.ascontiguousarray(grid_disparities(maps, views))
 

@@ -11,7 +11,7 @@ import lfstream
 from lfstream.cli import main
 from lfstream.codec.hint import HintOptions, decode_hint, disparity_errors, encode_hint, estimate_disparity
 from lfstream.codec.warp import warp_views
-from lfstream.errors import LFStreamError, LFValueError
+from lfstream.errors import LFShapeError, LFStreamError, LFValueError
 from lfstream.metrics import capped, mpsnr, mssim, psnr
 from lfstream.models.warp import warp_views_torch
 from lfstream.synth import fronto_parallel_plane, synth_clip
@@ -288,6 +288,32 @@ def test_hance_auto_on_cpu_leaves_the_fast_network_off_and_on_filters_first(monk
     assert (seen[0] == post_filter_jpeg(raw, packet.image)).all()
     assert not (seen[0] == post_filter_jpeg(raw, with_post_filter(packet.image, PostFilterChoice()))).all()
     assert (Decoder(header, hance="off").decode_centres([packet])[0] == post_filter_jpeg(raw, packet.image)).all()
+
+
+def test_depth_net_frames_keep_their_own_disparity_though_the_maps_array_is_reused():
+    """The decoder reuses one array for Depth-Net's per-view maps from batch to batch; each
+    frame's disparity (the centre's map) is its own: frames kept from an iterator equal
+    copies taken as they came, and differ between frames of a moving scene. view_disparities
+    writes into a given array and refuses a wrong one."""
+    import io
+
+    from lfstream.codec.decoder import iter_decode
+    from lfstream.codec.warp import view_disparities
+
+    clip = synth_clip(3, 5, (48, 64), seed=12, motion=0.8, camera_pan=0.3)
+    data = lfstream.encode(clip.lf, depth_hint=True)
+    kept, copies = [], []
+    for f in iter_decode(io.BytesIO(data), depth="net", hance="off"):
+        kept.append(f)
+        copies.append((f.disparity.copy(), f.lf.copy()))
+    for f, (d, lf) in zip(kept, copies):
+        assert np.array_equal(f.disparity, d) and np.array_equal(f.lf, lf)
+    assert not np.array_equal(copies[0][0], copies[-1][0])
+    d = kept[0].disparity
+    buf = np.full((5, 5, *d.shape), np.nan, np.float32)
+    assert view_disparities(d, (5, 5), out=buf) is buf and np.array_equal(buf, view_disparities(d, (5, 5)))
+    with pytest.raises(LFShapeError, match="out"):
+        view_disparities(d, (5, 5), out=buf[:, :, :, ::2])
 
 
 def test_decode_with_networks_and_switches(tmp_path):
