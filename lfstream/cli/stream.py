@@ -65,15 +65,15 @@ def run(args: argparse.Namespace) -> int:
                 source = Source(synthetic_source(frames=args.frames), None, None, args.frames)
             else:
                 source = file_source(args.input, read_options(args))
+            cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp,
+                                            depth_hint=not args.no_depth_hint, preset=args.preset,
+                                            residual=args.residual, residual_mode=args.residual_mode,
+                                            hance_map=args.hance_map, transport=args.transport,
+                                            fps=source.fps or 30.0)
         except LFStreamError:
-            if out is not None:  # an input refused before anything ran: nothing left behind
+            if out is not None:  # an input or options refused before anything ran: nothing left behind
                 remove_if_made_empty(out, created)
             raise
-        cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp, depth_hint=not args.no_depth_hint,
-                                        preset=args.preset, residual=args.residual,
-                                        residual_mode=args.residual_mode, hance_map=args.hance_map,
-                                        transport=args.transport,
-                                        fps=source.fps or 30.0)
         pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
                         present=source.present)

@@ -241,6 +241,10 @@ def test_stream_refusing_its_input_leaves_no_output_folder(capsys, tmp_path, mon
     (tmp_path / "mine").mkdir()
     code, _, err = run(capsys, "stream", "nothing", "-o", "mine")
     assert code == 2 and (tmp_path / "mine").is_dir()
+    # options refused together (checked once the input is known) leave no folder either
+    for options in (["--bpp", "0.02", "--residual", "40"], ["--hance-map", "--preset", "best"]):
+        code, _, err = run(capsys, "stream", "--frames", "1", "-o", "refused", *options)
+        assert code == 2 and len(err.strip().splitlines()) == 1 and not (tmp_path / "refused").exists(), options
 
 
 def test_baseline_metrics_count_present_views_only(capsys, tmp_path):
