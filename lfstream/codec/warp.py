@@ -267,12 +267,12 @@ def warp_views(
     return _warp_kernel(src, d, None, offsets, *_occlusion_plan(d, offsets, occlusion), gains, beside, out)
 
 
-def _check_out(out: np.ndarray | None, shape: tuple[int, ...]) -> None:
+def _check_out(out: np.ndarray | None, shape: tuple[int, ...], dtype=np.uint8) -> None:
     """Refuses an output array the kernel cannot write in place."""
-    if out is not None and (not isinstance(out, np.ndarray) or out.shape != shape or out.dtype != np.uint8
+    if out is not None and (not isinstance(out, np.ndarray) or out.shape != shape or out.dtype != dtype
                             or not out.flags.c_contiguous or not out.flags.writeable):
         got = f"{out.shape} {out.dtype}" if isinstance(out, np.ndarray) else type(out).__name__
-        raise LFValueError(f"out: a writeable C-contiguous uint8 array of shape {shape}, got {got}")
+        raise LFValueError(f"out: a writeable C-contiguous {np.dtype(dtype).name} array of shape {shape}, got {got}")
 
 
 def warp_views_at(centre: np.ndarray, disparity: np.ndarray, views: tuple[int, int], keys: list[tuple[int, int]],
@@ -505,11 +505,9 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
         check_finite(corr, "corrections")
     from lfstream.codec._kernels import splat_all_views
 
+    _check_out(out, (u, v, *d.shape), np.float32)
     if out is None:
         out = np.empty((u, v, *d.shape), np.float32)
-    elif out.shape != (u, v, *d.shape) or out.dtype != np.float32 or not out.flags.c_contiguous:
-        raise LFShapeError(f"out: a C-contiguous float32 array of shape {(u, v, *d.shape)}, got "
-                           f"{out.dtype} {tuple(out.shape)}")
     offsets = view_offsets((u, v), axes)
     splat_all_views(read_only(d), offsets, *_occlusion_plan(d, offsets, occlusion), read_only(corr), out)
     return out

@@ -11,7 +11,7 @@ import lfstream
 from lfstream.cli import main
 from lfstream.codec.hint import HintOptions, decode_hint, disparity_errors, encode_hint, estimate_disparity
 from lfstream.codec.warp import warp_views
-from lfstream.errors import LFShapeError, LFStreamError, LFValueError
+from lfstream.errors import LFStreamError, LFValueError
 from lfstream.metrics import capped, mpsnr, mssim, psnr
 from lfstream.models.warp import warp_views_torch
 from lfstream.synth import fronto_parallel_plane, synth_clip
@@ -294,7 +294,7 @@ def test_depth_net_frames_keep_their_own_disparity_though_the_maps_array_is_reus
     """The decoder reuses one array for Depth-Net's per-view maps from batch to batch; each
     frame's disparity (the centre's map) is its own: frames kept from an iterator equal
     copies taken as they came, and differ between frames of a moving scene. view_disparities
-    writes into a given array and refuses a wrong one."""
+    writes into a given array and refuses one it cannot write (the warp's check of its `out`)."""
     import io
 
     from lfstream.codec.decoder import iter_decode
@@ -312,7 +312,7 @@ def test_depth_net_frames_keep_their_own_disparity_though_the_maps_array_is_reus
     d = kept[0].disparity
     buf = np.full((5, 5, *d.shape), np.nan, np.float32)
     assert view_disparities(d, (5, 5), out=buf) is buf and np.array_equal(buf, view_disparities(d, (5, 5)))
-    with pytest.raises(LFShapeError, match="out"):
+    with pytest.raises(LFValueError, match="out: a writeable C-contiguous float32 array"):
         view_disparities(d, (5, 5), out=buf[:, :, :, ::2])
 
 
