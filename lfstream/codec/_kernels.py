@@ -638,13 +638,13 @@ def squared_error_map(views, ref, present, out):  # pragma: no cover - compiled
         row = out[y]
         for x in range(w):
             row[x] = 0
+        acc = np.empty(w * c, np.int32)  # a view's squares along the row, at most 255**2 each
         for a in range(n_u):
             for b in range(n_v):
                 if not present[a, b]:
                     continue
                 p = views[a, b, y].ravel()
                 q = ref[a, b, y].ravel()
-                acc = np.zeros(w * c, np.int32)  # at most 255**2 a sample: no overflow
                 for k in range(w * c):
                     d = np.int32(p[k]) - np.int32(q[k])
                     acc[k] = d * d
