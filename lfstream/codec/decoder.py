@@ -418,13 +418,12 @@ class Decoder:
         from lfstream.models.depth_net import DepthRefiner, predict_view_disparities
 
         stacked = np.stack(hints) if self._depth_net.config.hint else None
-        shape = (len(packets), *self.header.views, h, w)
         refines = isinstance(self._depth_net, DepthRefiner)  # a DepthNet makes its maps itself
         if refines and (self._view_maps is None or self._view_maps.shape[0] < len(packets)):
             # the per-view maps' array, kept from batch to batch: fresh, its 40 MB a 7x7x375x540
             # frame were 6-12 ms of page faults a frame, and tens where the kernel compacted
             # huge pages for them (bench/throughput.py's Depth-Net decode: 43-83 ms)
-            self._view_maps = np.empty(shape, np.float32)
+            self._view_maps = np.empty((len(packets), *self.header.views, h, w), np.float32)
         view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device, axes,
                                              out=self._view_maps if refines else None)
         u0, v0 = self.header.views[0] // 2, self.header.views[1] // 2

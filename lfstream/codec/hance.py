@@ -94,4 +94,4 @@ def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarra
     return errors.argmin(axis=0).astype(np.uint8)
 
 
-__all__ = ["HANCE_MAP_TILES", "tile_edges", "measure_hance_map"]
+__all__ = ["HANCE_MAP_PRESET", "HANCE_MAP_TILES", "tile_edges", "measure_hance_map"]

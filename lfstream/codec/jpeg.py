@@ -304,6 +304,7 @@ def blend_restored(filtered: np.ndarray, restored: np.ndarray, strength: np.ndar
     a = filtered.astype(np.float32)
     return np.clip(np.rint(a + s * (restored.astype(np.float32) - a)), 0, 255).astype(np.uint8)
 
+
 def _snap_black(img: np.ndarray, floor: int) -> np.ndarray:
     """``img`` with the pixels whose channels are all at or below ``floor`` set to 0."""
     if floor:

@@ -76,9 +76,9 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
             mssim(lf, decoded.lf)
     # last, as a stream without a hint refuses depth "net" (its stage reports that): the
     # networks the stream's decoder runs (hance "on", depth "net"; "auto" decides on the
-    # warm-up's header, coded by the stream's encoder settings), so that torch's import (0.8 s here) and their
-    # first call are not paid by the first frame inside the timed run (the built-in clip
-    # with both: 3.6-4.1 frames/s with them in it, 4.6-5.3 without)
+    # warm-up's header, coded by the stream's encoder settings), so that torch's import
+    # (0.8 s here) and their first call are not paid by the first frame inside the timed
+    # run (the built-in clip with both: 3.6-4.1 frames/s with them in it, 4.6-5.3 without)
     networks = Decoder(header, depth=config.depth, hance=config.hance, device=config.device)
     if networks.runs_networks:
         networks.decode_packet(packet)
