@@ -1,11 +1,13 @@
 """LF video files: writing and reading a lossless mosaic video, and the commands that read one.
 
-1. The lossless ``.mp4`` mosaic (x264 RGB, QP 0) with the writer's settings
-   (:data:`lfstream.io.video.LOSSLESS_X264`: CAVLC) against the settings before them
-   (``veryfast``, CABAC), on the same frames in the same run: ms a frame to write, ms a frame
-   of wall and CPU time to read (decode and RGB conversion), MB a frame.
-2. ``lfstream stream``, ``encode``, ``decode -o clip.mp4`` and ``info`` on the clip written
-   with the writer's settings, each in a fresh process: seconds and peak memory.
+1. The lossless mosaic formats lfstream writes (:data:`lfstream.io.video.LOSSLESS_CODECS`):
+   ``.mp4`` (x264 RGB, QP 0, :data:`lfstream.io.video.LOSSLESS_X264`: CAVLC) against its
+   settings before (``veryfast``, CABAC), ``.mkv`` (FFV1) and ``.avi`` (Ut Video), on the
+   same frames in the same run: ms a frame to write, ms a frame of wall and CPU time to read
+   (decode and RGB conversion), MB a frame.
+2. ``lfstream stream``, ``encode``, ``decode -o clip.mp4`` and ``info`` on the ``.mp4`` clip,
+   and ``lfstream stream`` on the ``.avi`` one, each in a fresh process: seconds and peak
+   memory.
 
 The clip is the synthetic renderer's, 7x7x375x540 unless ``--quick``.
 
@@ -26,7 +28,6 @@ import numpy as np
 from _harness import ROOT, emit, parser
 
 from lfstream.io import VideoWriter, grid_metadata, iter_video_frames
-from lfstream.io.video import LOSSLESS_X264
 from lfstream.lightfield import to_mosaic
 from lfstream.synth import SynthConfig, iter_clip
 
@@ -49,6 +50,15 @@ def write(path: Path, mosaics: list[np.ndarray], options: dict, fps: float = 30.
                 out.mux(packet)
         for packet in stream.encode():
             out.mux(packet)
+    return (time.perf_counter() - t0) / len(mosaics)
+
+
+def write_lossless(path: Path, mosaics: list[np.ndarray], fps: float = 30.0) -> float:
+    """Seconds a frame to write ``mosaics`` through lfstream's lossless writer for the extension."""
+    t0 = time.perf_counter()
+    with VideoWriter(path, fps, lossless=True, metadata=grid_metadata((7, 7))) as w:
+        for m in mosaics:
+            w.write(m)
     return (time.perf_counter() - t0) / len(mosaics)
 
 
@@ -90,34 +100,37 @@ def main(argv=None) -> dict:
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        for name, options in (("previous (veryfast, CABAC)", PREVIOUS_X264), ("lfstream (faster, CAVLC)", LOSSLESS_X264)):
-            path = folder / f"{len(results)}.mp4"
-            write_s = write(path, mosaics, options)
+        clips = {}
+        for name, ext, options in (("lossless mp4, previous (veryfast, CABAC)", ".mp4", PREVIOUS_X264),
+                                   ("lossless mp4 (x264 faster, CAVLC)", ".mp4", None),
+                                   ("lossless mkv (FFV1)", ".mkv", None), ("lossless avi (Ut Video)", ".avi", None)):
+            path = folder / f"{len(results)}{ext}"
+            write_s = write(path, mosaics, options) if options is not None else write_lossless(path, mosaics)
             read_wall, read_cpu = read(path, mosaics)
-            row = {"name": f"lossless mp4, {name}", "write_ms": write_s * 1e3, "read_wall_ms": read_wall * 1e3,
+            row = {"name": name, "write_ms": write_s * 1e3, "read_wall_ms": read_wall * 1e3,
                    "read_cpu_ms": read_cpu * 1e3, "mb_per_frame": path.stat().st_size / len(mosaics) / 1e6}
             results.append(row)
-            print(f"{row['name']:36s} write {row['write_ms']:7.1f} ms  read {row['read_wall_ms']:7.1f} ms wall, "
+            if options is None:
+                clips.setdefault(ext, path)
+            print(f"{row['name']:42s} write {row['write_ms']:7.1f} ms  read {row['read_wall_ms']:7.1f} ms wall, "
                   f"{row['read_cpu_ms']:7.1f} ms CPU  {row['mb_per_frame']:.2f} MB a frame")
-        old, new = results
-        print(f"  the writer's settings: reading {old['read_cpu_ms'] / new['read_cpu_ms']:.2f}x less CPU, writing "
+        old, new = results[:2]
+        print(f"  the mp4 writer's settings: reading {old['read_cpu_ms'] / new['read_cpu_ms']:.2f}x less CPU, writing "
               f"{old['write_ms'] / new['write_ms']:.2f}x faster, {new['mb_per_frame'] / old['mb_per_frame'] - 1:+.1%} bytes")
-        clip = folder / "clip.mp4"
-        with VideoWriter(clip, 30.0, lossless=True, metadata=grid_metadata((7, 7))) as w:
-            for m in mosaics:
-                w.write(m)
         del mosaics
+        clip, fast = clips[".mp4"], clips[".avi"]
         runs = [("info", ["info", str(clip)]),
                 ("encode", ["encode", str(clip), "-o", str(folder / "clip.lfs")]),
                 ("decode -o .mp4", ["decode", str(folder / "clip.lfs"), "-o", str(folder / "back.mp4")]),
-                ("stream", ["stream", str(clip), "-o", str(folder / "out"), "--json"])]
+                ("stream", ["stream", str(clip), "-o", str(folder / "out"), "--json"]),
+                ("stream .avi", ["stream", str(fast), "-o", str(folder / "out_avi"), "--json"])]
         for name, cmd in runs:
             r = command(cmd)
             row = {"name": f"lfstream {name}", "frames": frames, "s": r["s"], "peak_mb": r["peak_mb"]}
-            if name == "stream":
+            if name.startswith("stream"):
                 import json
 
-                summary = json.loads((folder / "out" / "summary.json").read_text())
+                summary = json.loads((Path(cmd[3]) / "summary.json").read_text())
                 row["fps"] = summary.get("fps")
             results.append(row)
             print(f"lfstream {name:16s} {r['s']:6.2f} s  peak {r['peak_mb']:7.0f} MB"

@@ -36,6 +36,16 @@ SIZE_METADATA_PREFIX = "lfstream-size="
 #: writing time). ``faster`` rather than ``veryfast``: 8 % fewer bytes on the noise-free clip.
 #: Files written before stay valid H.264 (they read at the old speed).
 LOSSLESS_X264 = {"qp": "0", "preset": "faster", "tune": "fastdecode"}
+#: The lossless codec by extension: x264 RGB in ``.mp4``/``.mov`` (the smallest files: it
+#: predicts a frame from the one before), FFV1 in ``.mkv`` (the archival standard), Ut Video
+#: in ``.avi``/``.nut`` (each frame on its own, planes predicted from the left neighbour and
+#: Huffman-coded: the quickest to read). Measured on the 2-core Zen 5 EPYC, 7x7x375x540
+#: mosaics (bench/video_io.py), reading a frame (wall / CPU) and its size: the built-in
+#: clip's noisy frames x264 152-185 / 267-315 ms, 12.8 MB; FFV1 252 / 490 ms, 11.2 MB; Ut
+#: Video 41-50 / 46-53 ms, 13.2 MB; lytro_bikes' views x264 177 / 197 ms, 6.0 MB, Ut Video
+#: 34 / 58 ms, 15.8 MB (without noise x264's predictions pay; frames that repeat cost it
+#: almost nothing). So ``.avi`` is the format to stream from disk, ``.mp4`` to keep.
+LOSSLESS_CODECS = {".mkv": ("ffv1", "bgr0"), ".avi": ("utvideo", "gbrp"), ".nut": ("utvideo", "gbrp")}
 
 
 def _parse_pair(prefix: str, value: str | None) -> tuple[int, int] | None:
@@ -165,8 +175,9 @@ class VideoWriter:
     written under a temporary name and renamed when closed, so an interrupted write never
     leaves a broken file and a closed one is always complete and playable.
 
-    Codecs by extension and ``lossless``: FFV1 (``.mkv``/``.avi``/``.nut``) or x264 RGB at
-    QP 0 (``.mp4``/``.mov``, :data:`LOSSLESS_X264`: CAVLC, quick to read) when lossless;
+    Codecs by extension and ``lossless`` (:data:`LOSSLESS_CODECS`): FFV1 (``.mkv``), Ut Video
+    (``.avi``/``.nut``, the quickest to read) or x264 RGB at QP 0 (``.mp4``/``.mov``,
+    :data:`LOSSLESS_X264`: CAVLC, the smallest) when lossless;
     x264 yuv420p (plays everywhere; odd sizes padded, the true size recorded and cropped
     back by :func:`iter_video_frames`) at ``crf`` otherwise; ``.gif`` an animated GIF.
     """
@@ -207,8 +218,8 @@ class VideoWriter:
         if ext == ".gif":
             codec, pix_fmt, options = "gif", "rgb8", {}
         elif self._lossless:
-            codec, pix_fmt, options = ("ffv1", "bgr0", {}) if ext in (".mkv", ".avi", ".nut") else (
-                "libx264rgb", "rgb24", dict(LOSSLESS_X264))
+            codec, pix_fmt = LOSSLESS_CODECS.get(ext, ("libx264rgb", "rgb24"))
+            options = dict(LOSSLESS_X264) if codec == "libx264rgb" else {}
         else:
             # yuv420p H.264 (High profile) plays in every browser and player; 4:2:0 needs even
             # sizes, so odd frames are padded by edge replication and the true size is recorded
@@ -357,6 +368,6 @@ def grid_metadata(views: tuple[int, int]) -> dict[str, str]:
     return {GRID_METADATA_KEY: f"{GRID_METADATA_PREFIX}{views[0]}x{views[1]}"}
 
 
-__all__ = ["VIDEO_EXTS", "GRID_METADATA_KEY", "GRID_METADATA_PREFIX", "SIZE_METADATA_PREFIX", "LOSSLESS_X264",
+__all__ = ["VIDEO_EXTS", "GRID_METADATA_KEY", "GRID_METADATA_PREFIX", "SIZE_METADATA_PREFIX", "LOSSLESS_X264", "LOSSLESS_CODECS",
            "VideoWriter", "rgb_to_video_i420", "write_video", "iter_video_frames", "VideoInfo", "video_info",
            "video_grid_and_fps", "collect_frames", "read_mosaic_video", "grid_metadata"]

@@ -115,6 +115,22 @@ def test_lossless_mp4_is_exact_and_coded_for_quick_reading(tmp_path, rng):
     assert _entropy_coding_flags(tmp_path / "cabac.mp4") == [1]
 
 
+@pytest.mark.parametrize("ext, codec", [(".avi", "utvideo"), (".nut", "utvideo"), (".mkv", "ffv1"), (".mp4", "h264")])
+def test_lossless_containers_code_their_codec_bit_exactly(tmp_path, rng, ext, codec):
+    """Each lossless container holds the codec LOSSLESS_CODECS names (Ut Video in .avi and
+    .nut, the quick one to read; FFV1 in .mkv; x264 RGB in .mp4), its frames RGB bit for bit
+    at an odd size, with the view grid in its metadata (read back as a light field)."""
+    from lfstream.io import read_lf, write_lf
+
+    lf = np.stack([_smooth_rgb(rng, 21, 35) for _ in range(2 * 3)]).reshape(1, 2, 3, 21, 35, 3)
+    lf = np.concatenate([lf, lf[..., ::-1, :]])  # two frames
+    path = tmp_path / f"clip{ext}"
+    write_lf(path, lf)
+    with av.open(str(path)) as container:
+        assert container.streams.video[0].codec_context.name == codec
+    np.testing.assert_array_equal(read_lf(path), lf)
+
+
 _WRITE_SCRIPT = """
 import sys
 import numpy as np
@@ -122,7 +138,7 @@ from lfstream.io import VideoWriter
 from lfstream.synth import synth_clip
 # moving layers with sensor noise: content on which the lossy writer's bytes used to vary
 frames = [np.ascontiguousarray(f[1, 1]) for f in synth_clip(12, 3, (150, 200), seed=4, noise=2.0).lf]
-for name, lossless in (("lossy.mp4", False), ("lossless.mp4", True), ("ffv1.mkv", True)):
+for name, lossless in (("lossy.mp4", False), ("lossless.mp4", True), ("ffv1.mkv", True), ("utvideo.avi", True)):
     with VideoWriter(sys.argv[1] + "/" + name, lossless=lossless) as w:
         for f in frames:
             w.write(f)
@@ -145,5 +161,5 @@ def test_the_same_frames_give_the_same_file_whatever_the_heap_holds(tmp_path):
         env = {**os.environ, "MALLOC_PERTURB_": perturb}
         subprocess.run([sys.executable, "-c", _WRITE_SCRIPT, str(out)], check=True, env=env, timeout=120)
         outs.append(out)
-    for name in ("lossy.mp4", "lossless.mp4", "ffv1.mkv"):
+    for name in ("lossy.mp4", "lossless.mp4", "ffv1.mkv", "utvideo.avi"):
         assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name

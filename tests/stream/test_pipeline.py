@@ -57,7 +57,7 @@ def test_transports_agree_and_outputs_are_valid(tmp_path, transport):
     bpp = sum(row["bpp"] for row in summary["per_frame"]) / 4
     assert bpp == pytest.approx(summary["bpp"], rel=1e-3)
     assert len(list(iter_video_frames(out / "plane_00.mp4"))) == 4
-    assert len(list(iter_video_frames(out / "reconstructed.mkv"))) == 4
+    assert len(list(iter_video_frames(out / "reconstructed.avi"))) == 4
     if transport == "file":
         data = (out / "stream.lfs").read_bytes()
         run2, out2 = run(tmp_path, "again", transport="file", save=())
@@ -109,7 +109,7 @@ def test_tcp_faults_are_detected_and_skipped(tmp_path):
     assert summary["frames"] == len(delivered)
     # every delivered frame is exactly what a clean decoder makes of that packet
     dec = Decoder(header, hance="off")
-    got = [f for f in iter_video_frames(out / "reconstructed.mkv")]
+    got = [f for f in iter_video_frames(out / "reconstructed.avi")]
     from lfstream.lightfield import to_mosaic
 
     for img, k in zip(got, delivered):
