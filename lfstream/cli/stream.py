@@ -46,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from lfstream.errors import LFStreamError
     from lfstream.io._fs import fresh_dir, prepare_output_dir, remove_if_made_empty
-    from lfstream.stream import Pipeline, Source, file_source, synthetic_source
+    from lfstream.stream import Pipeline, Source, file_source, render_builtin_clip, synthetic_source
     from lfstream.stream.report import stopped_summary
     from lfstream.stream.transport import TcpSender, parse_address
 
@@ -62,7 +62,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         try:
             if args.input is None:
-                source = Source(synthetic_source(frames=args.frames), None, None, args.frames)
+                # rendered into its cache while the kernels load, where it is not there yet
+                source = Source(synthetic_source(frames=args.frames), None, None, args.frames,
+                                prepare=lambda stop: render_builtin_clip(frames=args.frames, stop=stop))
             else:
                 source = file_source(args.input, read_options(args))
             cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp,
@@ -76,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
             raise
         pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
-                        present=source.present)
+                        present=source.present, prepare=source.prepare)
         with _pipeline.single_threaded_opencv():
             summary = pipe.run()
     except KeyboardInterrupt:

@@ -14,7 +14,7 @@ from lfstream.stream.pipeline import Pipeline, PipelineError
 from lfstream.stream.refocuser import Refocuser
 from lfstream.stream.report import write_summary
 from lfstream.stream.sinks import Sink
-from lfstream.stream.sources import Source, file_source, synthetic_source
+from lfstream.stream.sources import Source, file_source, render_builtin_clip, synthetic_source
 
-__all__ = ["StreamConfig", "Pipeline", "PipelineError", "Refocuser", "Sink", "Source", "synthetic_source", "file_source",
-           "write_summary", "REFOCUS_MODES", "TRANSPORTS", "SAVE_KINDS"]
+__all__ = ["StreamConfig", "Pipeline", "PipelineError", "Refocuser", "Sink", "Source", "synthetic_source",
+           "render_builtin_clip", "file_source", "write_summary", "REFOCUS_MODES", "TRANSPORTS", "SAVE_KINDS"]

@@ -62,6 +62,9 @@ from lfstream.stream.transport import FileChannel, InprocChannel, LazyTcpSender,
 
 #: The status line while the kernels load (:mod:`lfstream.stream.warmup`), before the first frame.
 WARMUP_STATUS = "warming up: loading the compiled kernels (the first run after an install compiles them, about a minute)"
+#: The same with a source to prepare (:attr:`lfstream.stream.Source.prepare`).
+PREPARE_STATUS = (WARMUP_STATUS + "; preparing the source (the built-in clip: rendered into the cache on a first run, "
+                                  "about 0.4 s a frame)")
 STAGE_NAMES = ("producer", "encoder", "decoder", "refocus", "sink", "metrics")
 #: After a stop (Ctrl-C), how long the pipeline waits for its stages to finish their item.
 STOP_GRACE_S = 10.0
@@ -83,6 +86,10 @@ class Pipeline:
         total_frames: how many frames the source holds, when known (the status line's ETA).
         present: ``(U, V)`` mask of the source's views that exist (``None``: all); the
             encoder needs the centre view only, the metrics count present views only.
+        prepare: the source's work before the stream is timed
+            (:attr:`lfstream.stream.Source.prepare`: rendering the built-in clip into its
+            cache), run on a thread beside the kernels' warm-up and waited for (its time is
+            in the summary's ``warmup_s``); given an event set when the run is stopped.
 
     Attributes:
         stats: per stage name, its :class:`~lfstream.stream.report.StageStats` (live while running).
@@ -91,7 +98,8 @@ class Pipeline:
     def __init__(self, source: Iterator[np.ndarray] | None, config: StreamConfig, out: Path | None = None,
                  sender: Sender | None = None, receiver: Receiver | None = None,
                  progress: Callable[[str], None] | None = None, stream_file: Path | None = None,
-                 total_frames: int | None = None, present: np.ndarray | None = None) -> None:
+                 total_frames: int | None = None, present: np.ndarray | None = None,
+                 prepare: Callable[[threading.Event], object] | None = None) -> None:
         config.validate()
         self.config = config
         self.source = source
@@ -102,10 +110,20 @@ class Pipeline:
         self.stream_file = stream_file
         self.total_frames = total_frames
         self.present = present
+        self.prepare = prepare
+        self._prepare_stop = threading.Event()
         self.control = RunControl()
         self.stats = {name: StageStats(name) for name in STAGE_NAMES}
         self.interrupted = False
         self.queues: dict[str, queue.Queue] = {}
+
+    def _prepare(self) -> None:
+        """Runs :attr:`prepare`; a failure is left to the stream (the source then does the
+        work as it goes, or fails in the producer stage, which names it)."""
+        try:
+            self.prepare(self._prepare_stop)
+        except Exception:  # noqa: BLE001 - see the docstring
+            pass
 
     def stop(self) -> None:
         """Stops every stage (Ctrl-C); the run then reports ``interrupted``."""
@@ -140,11 +158,23 @@ class Pipeline:
 
         t_warm = time.perf_counter()
         if self.progress is not None:  # silent otherwise: a fresh install compiles here for most of a minute
-            self.progress(WARMUP_STATUS)
+            self.progress(WARMUP_STATUS if self.prepare is None else PREPARE_STATUS)
+        preparing = None
+        if self.prepare is not None:
+            preparing = threading.Thread(target=self._prepare, name="lfstream-prepare", daemon=True)
+            preparing.start()
         try:
-            warm_kernels(cfg, decode=self.sender is None)
-        except Exception:  # noqa: BLE001 - the warm-up only loads kernels: whatever failed here
-            pass  # fails again in its stage, which reports it with the stage and frame
+            try:
+                warm_kernels(cfg, decode=self.sender is None)
+            except Exception:  # noqa: BLE001 - the warm-up only loads kernels: whatever failed here
+                pass  # fails again in its stage, which reports it with the stage and frame
+            if preparing is not None:
+                while preparing.is_alive():  # in slices: Ctrl-C reaches this thread meanwhile
+                    preparing.join(0.2)
+        finally:
+            if preparing is not None and preparing.is_alive():  # Ctrl-C: the source stops and cleans up
+                self._prepare_stop.set()
+                preparing.join()
         t_start = time.perf_counter()
         send_channel, recv_channel = self._channels()
         qs = cfg.queue_size
@@ -235,4 +265,4 @@ class Pipeline:
         return " | ".join(parts)
 
 
-__all__ = ["Pipeline", "PipelineError", "STAGE_NAMES", "WARMUP_STATUS"]
+__all__ = ["Pipeline", "PipelineError", "STAGE_NAMES", "WARMUP_STATUS", "PREPARE_STATUS"]

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+import threading
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,39 +33,52 @@ def cache_dir() -> Path | None:
         return None
 
 
-def synthetic_source(frames: int = 24, views: int = 7, size: tuple[int, int] = (375, 540),
-                     seed: int = 2024, cache: bool = True) -> Iterator[np.ndarray]:
-    """The built-in clip: a layered synthetic scene with motion, a pan, sensor noise and
-    vignetting (deterministic).
+def _clip_config(frames: int, views: int, size: tuple[int, int], seed: int):
+    from lfstream.synth import SynthConfig
 
-    Rendering costs ~0.4 s a frame at 7x7x375x540, more than the whole codec, so with
-    ``cache`` the first run writes the frames it renders to :func:`cache_dir` (a raw
-    ``.npy``, 30 MB a frame, renamed into place only when complete) and later runs read
-    them back memory-mapped (read-only frames): the source is then never the pipeline's
-    bottleneck.
-    """
-    from lfstream.synth import SynthConfig, iter_clip
+    return SynthConfig(frames=frames, views=views, size=size, layers=4, motion=1.0, camera_pan=0.4,
+                       noise=1.5, vignetting=0.2, seed=seed)
 
-    cfg = SynthConfig(frames=frames, views=views, size=size, layers=4, motion=1.0, camera_pan=0.4,
-                      noise=1.5, vignetting=0.2, seed=seed)
-    folder = cache_dir() if cache else None
-    shape = (frames, views, views, size[0], size[1], 3)
-    path = None if folder is None else folder / (
+
+def _clip_cache(frames: int, views: int, size: tuple[int, int], seed: int) -> Path | None:
+    """The cache file of the built-in clip with these parameters (``None``: no cache folder)."""
+    folder = cache_dir()
+    return None if folder is None else folder / (
         f"builtin-v{BUILTIN_CLIP_VERSION}-{frames}x{views}x{views}x{size[0]}x{size[1]}-seed{seed}.npy")
-    if path is not None and path.exists():
-        try:
-            clip = np.load(path, mmap_mode="r")
-        except (OSError, ValueError):
-            clip = None
-        if clip is not None and clip.shape == shape and clip.dtype == np.uint8:
-            # read-only views of the mapped file, not copies: a 30 MB copy a frame page-faults
-            # a fresh buffer, and beside the pipeline's other threads those faults cost
-            # 20-55 ms of system time a frame (measured per thread); the views fault in
-            # page-cache pages only
-            yield from clip
-            return
+
+
+def _cached_clip(path: Path | None, shape: tuple[int, ...]) -> np.ndarray | None:
+    """The cached clip at ``path`` memory-mapped read-only, where it is there and whole."""
+    if path is None or not path.exists():
+        return None
+    try:
+        clip = np.load(path, mmap_mode="r")
+    except (OSError, ValueError):
+        return None
+    return clip if clip.shape == shape and clip.dtype == np.uint8 else None
+
+
+def _fits_on_disk(folder: Path, nbytes: int) -> bool:
+    """Whether ``nbytes`` leave a quarter of ``folder``'s free space: the cache is a
+    memory-mapped file, and a mapped page written past a full disk is a SIGBUS, not an error."""
+    import shutil
+
+    try:
+        return nbytes <= 0.75 * shutil.disk_usage(folder).free
+    except OSError:
+        return False
+
+
+def _render_clip(frames: int, views: int, size: tuple[int, int], seed: int, path: Path | None,
+                 stop: threading.Event | None = None) -> Iterator[np.ndarray]:
+    """Renders the clip frame by frame, storing each in a temporary sibling of ``path``
+    (where it can be written) that is renamed into place once every frame is in it; a render
+    stopped early (``stop`` set, or the generator closed) leaves no partial cache."""
+    from lfstream.synth import iter_clip
+
+    shape = (frames, views, views, size[0], size[1], 3)
     store = None
-    if path is not None:
+    if path is not None and _fits_on_disk(path.parent, int(np.prod(shape))):
         from lfstream.io._fs import temp_sibling
 
         tmp = temp_sibling(path)
@@ -74,7 +88,9 @@ def synthetic_source(frames: int = 24, views: int = 7, size: tuple[int, int] = (
             store = None
     done = 0
     try:
-        for lf, _ in iter_clip(cfg):
+        for lf, _ in iter_clip(_clip_config(frames, views, size, seed)):
+            if stop is not None and stop.is_set():
+                break
             if store is not None:
                 store[done] = lf
             done += 1
@@ -94,6 +110,49 @@ def synthetic_source(frames: int = 24, views: int = 7, size: tuple[int, int] = (
                 pass
 
 
+def synthetic_source(frames: int = 24, views: int = 7, size: tuple[int, int] = (375, 540),
+                     seed: int = 2024, cache: bool = True) -> Iterator[np.ndarray]:
+    """The built-in clip: a layered synthetic scene with motion, a pan, sensor noise and
+    vignetting (deterministic).
+
+    Rendering costs ~0.4 s a frame at 7x7x375x540, more than the whole codec, so with
+    ``cache`` the first run writes the frames it renders to :func:`cache_dir` (a raw
+    ``.npy``, 30 MB a frame, renamed into place only when complete; :func:`render_builtin_clip`
+    renders it ahead, as ``lfstream stream`` does while its kernels load) and later runs read
+    them back memory-mapped (read-only frames): the source is then never the pipeline's
+    bottleneck.
+    """
+    shape = (frames, views, views, size[0], size[1], 3)
+    path = _clip_cache(frames, views, size, seed) if cache else None
+    clip = _cached_clip(path, shape)
+    if clip is not None:
+        # read-only views of the mapped file, not copies: a 30 MB copy a frame page-faults
+        # a fresh buffer, and beside the pipeline's other threads those faults cost
+        # 20-55 ms of system time a frame (measured per thread); the views fault in
+        # page-cache pages only
+        yield from clip
+        return
+    yield from _render_clip(frames, views, size, seed, path)
+
+
+def render_builtin_clip(frames: int = 24, views: int = 7, size: tuple[int, int] = (375, 540), seed: int = 2024,
+                        stop: threading.Event | None = None) -> Path | None:
+    """Renders the built-in clip into its cache (:func:`synthetic_source`) where it is not
+    there yet, so that a stream of it reads it back instead of rendering as it goes; returns
+    the cache file, ``None`` where there is no cache folder (nothing is rendered: the frames
+    would have to be held in memory) or ``stop`` was set first. The rendering runs numpy
+    and OpenCV, which release the GIL: ``lfstream stream`` runs it beside the kernels'
+    warm-up (:class:`lfstream.stream.Pipeline`'s ``prepare``), so a first run's count of
+    frames a second is the pipeline's, not the renderer's."""
+    path = _clip_cache(frames, views, size, seed)
+    if path is None:
+        return None
+    if _cached_clip(path, (frames, views, views, size[0], size[1], 3)) is None:
+        for _ in _render_clip(frames, views, size, seed, path, stop):
+            pass
+    return path if path.exists() else None
+
+
 @dataclass
 class Source:
     """The frames of a stream and what is known about them.
@@ -104,12 +163,15 @@ class Source:
         present: ``(U, V)`` mask of the views that exist (a folder with missing views read
             with ``allow_missing``); ``None``: all views.
         total: number of frames, when known (progress and ETA).
+        prepare: work to do before the stream is timed, given an event that asks it to stop
+            (:func:`render_builtin_clip`); ``None``: none.
     """
 
     frames: Iterator[np.ndarray]
     fps: float | None = None
     present: np.ndarray | None = None
     total: int | None = None
+    prepare: Callable[[threading.Event], object] | None = None
 
 
 def file_source(path: str | os.PathLike, options: ReadOptions | None = None) -> Source:
@@ -134,4 +196,4 @@ def file_source(path: str | os.PathLike, options: ReadOptions | None = None) -> 
     return Source(iter(lf), loaded.fps, present, len(lf))
 
 
-__all__ = ["BUILTIN_CLIP_VERSION", "Source", "cache_dir", "synthetic_source", "file_source"]
+__all__ = ["BUILTIN_CLIP_VERSION", "Source", "cache_dir", "synthetic_source", "render_builtin_clip", "file_source"]

@@ -277,6 +277,90 @@ def test_builtin_clip_is_cached_and_identical_to_a_fresh_render(tmp_path, monkey
     assert len(list((tmp_path / "cache").glob("*seed10*"))) == 0
 
 
+def test_builtin_clip_rendered_ahead_is_the_clip_the_source_reads(tmp_path, monkeypatch):
+    """render_builtin_clip writes the cache synthetic_source then reads (the same frames as
+    a fresh render, memory-mapped: read-only); a second call renders nothing; a stop set
+    first renders nothing and leaves no file; without a cache folder it renders nothing."""
+    from lfstream.stream import render_builtin_clip
+
+    monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path / "cache"))
+    clip = dict(frames=3, views=5, size=(32, 48), seed=13)
+    stopped = threading.Event()
+    stopped.set()
+    assert render_builtin_clip(**clip, stop=stopped) is None
+    assert not list((tmp_path / "cache").iterdir())  # no partial cache, no temporary
+    path = render_builtin_clip(**clip)
+    assert path is not None and path.exists() and not list((tmp_path / "cache").glob(".*"))
+    stamp = path.stat().st_mtime_ns
+    assert render_builtin_clip(**clip) == path and path.stat().st_mtime_ns == stamp  # not rendered again
+    fresh = list(synthetic_source(**clip, cache=False))
+    read = list(synthetic_source(**clip))
+    assert all(np.array_equal(a, b) for a, b in zip(fresh, read)) and len(read) == 3
+    assert not read[0].flags.writeable  # the mapped cache, not a render
+    monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path / "cache" / path.name / "below-a-file"))
+    assert render_builtin_clip(**clip) is None
+    # a clip the disk cannot hold is not cached (a mapped page written past a full disk is
+    # a SIGBUS): the source still renders it, frame by frame
+    import lfstream.stream.sources as sources
+
+    assert sources._fits_on_disk(tmp_path, 1 << 20) and not sources._fits_on_disk(tmp_path, 1 << 62)
+    monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path / "full"))
+    monkeypatch.setattr(sources, "_fits_on_disk", lambda folder, nbytes: False)
+    assert render_builtin_clip(**clip) is None and not list((tmp_path / "full").iterdir())
+    assert all(np.array_equal(a, b) for a, b in zip(fresh, synthetic_source(**clip)))
+
+
+def test_prepare_runs_before_the_timed_stream_and_may_fail(tmp_path):
+    """A source's prepare runs during the warm-up: it has finished before the producer
+    takes the first frame, its time is in warmup_s, not in the frames' count; one that
+    raises leaves the stream to run as it would without it."""
+    events = []
+
+    def frames():
+        events.append("first frame")
+        yield from small_source(frames=2)
+
+    def prepare(stop):
+        time.sleep(0.3)
+        events.append("prepared")
+
+    def failing(stop):
+        raise OSError("disk full")
+
+    for name, hook in (("ok", prepare), ("failing", failing)):
+        events.clear()
+        out = prepare_output_dir(tmp_path / name)
+        summary = Pipeline(frames(), StreamConfig(refocus="sas", save=()), out, prepare=hook).run()
+        assert summary["frames"] == 2 and not summary["interrupted"]
+        if hook is prepare:
+            assert events == ["prepared", "first frame"]
+            assert summary["warmup_s"] >= 0.3
+        else:
+            assert events == ["first frame"]
+
+
+def test_ctrl_c_during_the_warm_up_stops_prepare(tmp_path, monkeypatch):
+    """Ctrl-C while the kernels load: the pipeline sets prepare's stop event and waits for
+    it to finish (a render stopped so removes its partial cache) before the interrupt goes on."""
+    import lfstream.stream.warmup as warmup
+
+    seen = {}
+
+    def prepare(stop):
+        seen["stopped"] = stop.wait(10.0)
+        seen["finished"] = True
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(warmup, "warm_kernels", interrupted)
+    out = prepare_output_dir(tmp_path / "out")
+    t0 = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        Pipeline(small_source(), StreamConfig(refocus="sas", save=()), out, prepare=prepare).run()
+    assert seen == {"stopped": True, "finished": True} and time.perf_counter() - t0 < 5.0
+
+
 def test_plane_videos_play_everywhere_and_lossless_is_an_option(tmp_path):
     """Odd-sized views (375 x 540 in the default clip): the planes are yuv420p H.264 (not
     High 4:4:4, which browsers and QuickTime refuse), padded to even size with the true
