@@ -84,6 +84,35 @@ def test_batch_encode_with_an_av1_preset_equals_a_single_encode(videos, tmp_path
         EncodeOptions(preset="slowest")
 
 
+def test_batch_encode_takes_the_default_choice_whole(tmp_path):
+    """One group per input gives lfstream.encode's bytes also where the default's choice
+    sends the hint at 1/8 (the batch coded it at 1/4 before: 25 % more bytes on the built-in
+    clip's scene) and with JPEG-Hance strength maps (sent with a JPEG centre, dropped where
+    the default codes the views with AV1, as lfstream encode does)."""
+    import io
+
+    from lfstream.codec.bitstream import read_header
+
+    coarse = synth_clip(2, 5, (128, 160), seed=1, motion=0.5, noise=2.0, vignetting=0.3).lf
+    mapped = synth_clip(2, 7, (64, 80), seed=2, motion=0.5, noise=2.0).lf
+    small = synth_clip(2, 5, (40, 48), seed=0, motion=0.5).lf  # the default: an AV1 centre
+    for name, lf, options, kwargs in (("coarse", coarse, EncodeOptions(), {}),
+                                      ("mapped", mapped, EncodeOptions(hance_map=True), {"hance_map": True}),
+                                      ("small", small, EncodeOptions(hance_map=True), {"hance_map": True})):
+        path = tmp_path / f"{name}.npy"
+        np.save(path, lf)
+        rep = batch([path], tmp_path / name, group_frames=100, encode=options)
+        assert rep.ok
+        data = open(rep.files[0].output, "rb").read()
+        assert data == lfstream.encode(lf, **kwargs), name
+        meta = read_header(io.BytesIO(data)).meta
+        if name == "coarse":
+            assert meta["hint"]["hint_scale"] == 8
+        assert ("hance_map" in meta) == (name == "mapped")
+    with pytest.raises(LFValueError, match="hance_map"):
+        EncodeOptions(preset="balanced", hance_map=True)
+
+
 @needs_ray
 def test_ray_engine_gives_byte_identical_outputs_and_survives_a_killed_worker(videos, tmp_path):
     paths, _ = videos

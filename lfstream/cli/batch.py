@@ -33,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="encode: centre-view coding, fast (JPEG), balanced or best (AV1); default: as lfstream "
                    "encode chooses for each input (fast from 7x7 views, AV1 with fewer, the views themselves "
                    "where warping cannot predict them)")
+    p.add_argument("--hance-map", action="store_true",
+                   help="encode: send JPEG-Hance strength maps with JPEG centre views (as lfstream encode "
+                   "--hance-map; measured on each group's first frame)")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto", help="decode: disparity source")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto", help="decode: JPEG-Hance")
     p.add_argument("--device", default="cpu", help="decode: where the networks run")
@@ -56,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
 
     report = batch(args.inputs, args.output, mode=args.mode, engine=args.engine, address=args.address,
                    workers=args.workers, group_frames=args.group,
-                   encode=EncodeOptions(quality=args.quality, depth_hint=not args.no_depth_hint, preset=args.preset),
+                   encode=EncodeOptions(quality=args.quality, depth_hint=not args.no_depth_hint, preset=args.preset,
+                                        hance_map=args.hance_map),
                    decode=DecodeOptions(depth=args.depth, hance=args.hance, device=args.device),
                    read=read_options(args), output_format=args.format, overwrite=args.overwrite)
     emit(args, report.as_dict(), _text)
