@@ -28,6 +28,7 @@ COMMANDS = {
     "decode": "lfstream.cli.decode",
     "baseline": "lfstream.cli.baseline",
     "batch": "lfstream.cli.batch",
+    "convert": "lfstream.cli.convert",
     "refocus": "lfstream.cli.refocus",
     "synth": "lfstream.cli.synth",
     "optics": "lfstream.cli.optics",

@@ -613,3 +613,52 @@ def test_encode_hance_map_sends_strength_maps_and_refuses_rate_control(capsys, t
     code, _, err = run(capsys, "encode", tmp_path / "lf.npy", "-o", tmp_path / "b.lfs", "--bpp", "0.05", "--hance-map")
     assert code == 2 and "--hance-map" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "b.lfs").exists()
+
+
+@pytest.mark.parametrize("name", ["clip.avi", "clip.npy", "clip.npz", "clipdir", "clip.mkv"])
+def test_convert_writes_the_same_frames_in_another_format(capsys, tmp_path, name):
+    """``convert`` of a lossless .mp4 mosaic video (read frame by frame) to each format:
+    the same frames bit for bit, the grid and the frame rate kept (where the format holds
+    them); the output is never the input, and an existing one is kept without --overwrite."""
+    import lfstream
+
+    clip = synth_clip(3, 5, (24, 32), seed=5, noise=2.0).lf
+    lfstream.write_lf(tmp_path / "src.mp4", clip, fps=12)
+    code, out, _ = run(capsys, "convert", tmp_path / "src.mp4", tmp_path / name, "--json")
+    result = json.loads(out)
+    assert code == 0 and result["frames"] == 3 and result["views"] == [5, 5] and result["size"] == [24, 32]
+    np.testing.assert_array_equal(lfstream.read_lf(tmp_path / name), clip)
+    if name.endswith((".avi", ".mkv")):
+        from lfstream.io import open_video_lf
+
+        assert open_video_lf(tmp_path / name).fps == pytest.approx(12)
+    code, _, err = run(capsys, "convert", tmp_path / "src.mp4", tmp_path / name)
+    assert code == 2 and "already exists" in err and len(err.strip().splitlines()) == 1
+    code, _, err = run(capsys, "convert", tmp_path / "src.mp4", tmp_path / "src.mp4", "--overwrite")
+    assert code == 2 and "the input itself" in err
+    np.testing.assert_array_equal(lfstream.read_lf(tmp_path / "src.mp4"), clip)
+
+
+def test_convert_refuses_missing_views_and_keeps_frames_on_ctrl_c(capsys, tmp_path, monkeypatch):
+    """A light field with missing views is refused in one line (nothing is filled in); Ctrl-C
+    during a convert exits 130 with the frames written so far in a valid file."""
+    import lfstream
+    import lfstream.io as io_pkg
+
+    code, _, err = run(capsys, "convert", shared("hci_star", "dino"), tmp_path / "dino.avi", "--allow-missing")
+    assert code == 2 and "missing" in err and not (tmp_path / "dino.avi").exists()
+    clip = synth_clip(4, 3, (24, 32), seed=6).lf
+    lfstream.write_lf(tmp_path / "src.npy", clip)
+    real = io_pkg.FrameWriter.write
+    calls = []
+
+    def write_then_stop(self, lf):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(self, lf)
+
+    monkeypatch.setattr(io_pkg.FrameWriter, "write", write_then_stop)
+    code, out, _ = run(capsys, "convert", tmp_path / "src.npy", tmp_path / "part.avi", "--json")
+    assert code == 130 and json.loads(out)["interrupted"] and json.loads(out)["frames"] == 2
+    np.testing.assert_array_equal(lfstream.read_lf(tmp_path / "part.avi"), clip[:2])

@@ -1,0 +1,73 @@
+"""``lfstream convert``: a light field or LF video from one format to another."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from lfstream.cli._common import add_read_options, emit, float_in
+
+HELP = "convert a light field or LF video to another format (e.g. an .mp4 mosaic to .avi, the quickest to stream)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", type=Path, help="any light field lfstream reads (an .lfs is decoded as lfstream decode does)")
+    p.add_argument("output", type=Path, help=".npy (T,U,V,H,W,3), .npz, a mosaic video (.avi/.nut Ut Video, .mp4 "
+                   "x264 RGB, .mkv FFV1: lossless) or a folder of R_C.png views")
+    p.add_argument("--lossy", action="store_true", help="a video as x264 yuv420p (plays everywhere; not exact)")
+    p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate of a video (default: the input's, else 30)")
+    p.add_argument("--overwrite", action="store_true")
+    add_read_options(p)
+    p.add_argument("--json", action="store_true")
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from lfstream.cli._common import interrupt_after, read_input
+    from lfstream.errors import LFValueError
+    from lfstream.io import FrameWriter, write_lf
+    from lfstream.io._fs import check_new_file
+
+    check_new_file(args.output, args.overwrite)
+    if args.input.resolve() == args.output.resolve():
+        raise LFValueError(f"{args.output}: the input itself; convert writes a new file")
+    ext = args.output.suffix.lower()
+    # a .npy is sized by the frames counted first; a .npz is compressed whole at the end;
+    # anything else is written frame by frame as the frames are read (one in memory)
+    source = read_input(args, count_frames=ext == ".npy")
+    if source.present is not None and not source.present.all():
+        missing = int((~source.present).sum())
+        raise LFValueError(f"{args.input}: {missing} view(s) missing; the formats lfstream writes hold every view, "
+                           "and missing ones are never filled silently")
+    fps = args.fps or source.fps or 30.0
+    t0 = time.perf_counter()
+    done, interrupted = 0, False
+    if ext == ".npz":
+        lf = source.whole if source.whole is not None else np.stack(list(source.frames))
+        write_lf(args.output, lf, fps=fps, overwrite=args.overwrite)
+        done = len(lf)
+    else:
+        writer = FrameWriter(args.output, source.count, fps=fps, lossless=not args.lossy, overwrite=args.overwrite)
+        try:
+            try:
+                for lf in source.frames:
+                    with interrupt_after():  # a frame is written whole
+                        writer.write(np.ascontiguousarray(lf))
+                        done += 1
+            except KeyboardInterrupt:  # Ctrl-C: the frames so far, the output finalised
+                interrupted = True
+                if not done:
+                    raise
+            writer.close(partial=interrupted)
+        except BaseException:
+            writer.abort()
+            raise
+    seconds = time.perf_counter() - t0
+    first = source.first
+    result = {"input": str(args.input), "output": str(args.output), "frames": done, "views": list(first.shape[:2]),
+              "size": list(first.shape[2:4]), "seconds": seconds, "interrupted": interrupted}
+    emit(args, result, lambda r: f"{done} frame(s) of {r['views'][0]}x{r['views'][1]} views, {r['size'][0]}x{r['size'][1]}, "
+         f"in {seconds:.2f} s -> {args.output}" + (" (interrupted)" if interrupted else ""))
+    return 130 if interrupted else 0
