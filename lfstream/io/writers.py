@@ -14,6 +14,10 @@ from lfstream.io.images import IMAGE_EXTS, write_image
 from lfstream.io.video import VIDEO_EXTS, VideoWriter, grid_metadata, write_video
 from lfstream.lightfield import check_lf, to_mosaic
 
+#: Files that are not light fields (a disparity map, a coded stream, a 256-colour GIF): a
+#: light field written there is refused rather than made a folder of that name.
+NOT_LF_EXTS = (".pfm", ".lfs", ".gif")
+
 
 def write_lf(
     path: str | os.PathLike,
@@ -28,8 +32,10 @@ def write_lf(
     """Writes a light field. The format follows ``path``:
 
     * ``*.npy``: the array as is; ``*.npz``: keys ``lf`` (and ``disparity`` if given);
-    * a video extension: a mosaic video with the grid in its metadata (lossless FFV1 for
-      ``.mkv``, x264 RGB QP 0 for ``.mp4`` when ``lossless``, else x264 CRF 18);
+    * a video extension: a mosaic video with the grid in its metadata (when ``lossless``:
+      Ut Video for ``.avi``/``.nut``, FFV1 for ``.mkv``, x264 RGB QP 0 for ``.mp4``/``.mov``,
+      VP9 for ``.webm``; else x264 CRF 18, VP9 in ``.webm``;
+      :class:`lfstream.io.VideoWriter`);
     * anything else: a folder of ``R_C.png`` views (0-based); a video ``(T, ...)`` becomes
       one sub-folder per frame, ``frame_000000/`` ….
 
@@ -55,7 +61,7 @@ def write_lf(
         video = lf if lf.ndim == 6 else lf[None]
         frames = [to_mosaic(f) for f in video]
         write_video(path, frames, fps=fps, lossless=lossless, metadata=grid_metadata(tuple(video.shape[1:3])))
-    elif ext in IMAGE_EXTS or ext in (".pfm", ".lfs"):
+    elif ext in IMAGE_EXTS or ext in NOT_LF_EXTS:
         raise LFValueError(f"{path}: cannot write a light field as {ext}; use .npy, .npz, a video or a folder")
     else:
         if lf.dtype != np.uint8:
@@ -145,7 +151,7 @@ class FrameWriter:
                  overwrite: bool = False, image_ext: str = ".png") -> None:
         self.path = Path(path)
         self._ext = self.path.suffix.lower()
-        if self._ext == ".npz" or self._ext in IMAGE_EXTS or self._ext in (".pfm", ".lfs"):
+        if self._ext == ".npz" or self._ext in IMAGE_EXTS or self._ext in NOT_LF_EXTS:
             raise LFValueError(f"{self.path}: cannot write a light field frame by frame as {self._ext}; use .npy, "
                                "a video or a folder")
         self._npy = NpyWriter(self.path, count) if self._ext == ".npy" else None

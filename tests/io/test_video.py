@@ -115,11 +115,13 @@ def test_lossless_mp4_is_exact_and_coded_for_quick_reading(tmp_path, rng):
     assert _entropy_coding_flags(tmp_path / "cabac.mp4") == [1]
 
 
-@pytest.mark.parametrize("ext, codec", [(".avi", "utvideo"), (".nut", "utvideo"), (".mkv", "ffv1"), (".mp4", "h264")])
+@pytest.mark.parametrize("ext, codec", [(".avi", "utvideo"), (".nut", "utvideo"), (".mkv", "ffv1"), (".mp4", "h264"),
+                                        (".webm", "vp9")])
 def test_lossless_containers_code_their_codec_bit_exactly(tmp_path, rng, ext, codec):
     """Each lossless container holds the codec LOSSLESS_CODECS names (Ut Video in .avi and
-    .nut, the quick one to read; FFV1 in .mkv; x264 RGB in .mp4), its frames RGB bit for bit
-    at an odd size, with the view grid in its metadata (read back as a light field)."""
+    .nut, the quick one to read; FFV1 in .mkv; x264 RGB in .mp4; VP9 in .webm, which holds
+    no x264: writing it raised PyAV's ValueError), its frames RGB bit for bit at an odd size,
+    with the view grid in its metadata (read back as a light field)."""
     from lfstream.io import read_lf, write_lf
 
     lf = np.stack([_smooth_rgb(rng, 21, 35) for _ in range(2 * 3)]).reshape(1, 2, 3, 21, 35, 3)
@@ -131,6 +133,30 @@ def test_lossless_containers_code_their_codec_bit_exactly(tmp_path, rng, ext, co
     np.testing.assert_array_equal(read_lf(path), lf)
 
 
+def test_lossy_webm_plays_back_close_and_a_gif_is_no_light_field(tmp_path, rng):
+    """A lossy .webm is VP9 yuv420p (an odd size padded and cropped back), close to its
+    frames; a light field is not written as a .gif (a 256-colour image, not read back as one):
+    refused in one line by write_lf and FrameWriter instead of made a folder of that name."""
+    from lfstream.errors import LFValueError
+    from lfstream.io import FrameWriter, write_lf
+
+    frames = [_smooth_rgb(rng, 47, 61) for _ in range(3)]
+    path = tmp_path / "lossy.webm"
+    with VideoWriter(path, lossless=False, crf=20) as w:
+        for f in frames:
+            w.write(f)
+    with av.open(str(path)) as container:
+        assert container.streams.video[0].codec_context.name == "vp9"
+    back = list(iter_video_frames(path))
+    assert [b.shape for b in back] == [f.shape for f in frames]
+    assert min(_psnr(a, b) for a, b in zip(frames, back)) > 35.0
+    lf = np.zeros((2, 2, 8, 8, 3), np.uint8)
+    for write in (lambda p: write_lf(p, lf), lambda p: FrameWriter(p)):
+        with pytest.raises(LFValueError, match="gif"):
+            write(tmp_path / "lf.gif")
+    assert not (tmp_path / "lf.gif").exists()
+
+
 _WRITE_SCRIPT = """
 import sys
 import numpy as np
@@ -138,7 +164,8 @@ from lfstream.io import VideoWriter
 from lfstream.synth import synth_clip
 # moving layers with sensor noise: content on which the lossy writer's bytes used to vary
 frames = [np.ascontiguousarray(f[1, 1]) for f in synth_clip(12, 3, (150, 200), seed=4, noise=2.0).lf]
-for name, lossless in (("lossy.mp4", False), ("lossless.mp4", True), ("ffv1.mkv", True), ("utvideo.avi", True)):
+for name, lossless in (("lossy.mp4", False), ("lossless.mp4", True), ("ffv1.mkv", True), ("utvideo.avi", True),
+                       ("lossy.webm", False)):
     with VideoWriter(sys.argv[1] + "/" + name, lossless=lossless) as w:
         for f in frames:
             w.write(f)
@@ -161,5 +188,5 @@ def test_the_same_frames_give_the_same_file_whatever_the_heap_holds(tmp_path):
         env = {**os.environ, "MALLOC_PERTURB_": perturb}
         subprocess.run([sys.executable, "-c", _WRITE_SCRIPT, str(out)], check=True, env=env, timeout=120)
         outs.append(out)
-    for name in ("lossy.mp4", "lossless.mp4", "ffv1.mkv", "utvideo.avi"):
+    for name in ("lossy.mp4", "lossless.mp4", "ffv1.mkv", "utvideo.avi", "lossy.webm"):
         assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
