@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from lfstream.cli._common import interrupt_after, read_input
-    from lfstream.errors import LFValueError
+    from lfstream.errors import LFFormatError, LFValueError
     from lfstream.io import FrameWriter, write_lf
     from lfstream.io._fs import check_new_file
 
@@ -50,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
         done = len(lf)
     else:
         writer = FrameWriter(args.output, source.count, fps=fps, lossless=not args.lossy, overwrite=args.overwrite)
+        damage = None
         try:
             try:
                 for lf in source.frames:
@@ -60,10 +61,16 @@ def run(args: argparse.Namespace) -> int:
                 interrupted = True
                 if not done:
                     raise
-            writer.close(partial=interrupted)
+            except LFFormatError as exc:  # a video damaged part way: the frames before it, as decode keeps
+                damage = exc
+                if not done:
+                    raise
+            writer.close(partial=interrupted or damage is not None)
         except BaseException:
             writer.abort()
             raise
+        if damage is not None:
+            raise LFFormatError(f"{damage} ({done} complete frame(s) before it written to {args.output})")
     seconds = time.perf_counter() - t0
     first = source.first
     result = {"input": str(args.input), "output": str(args.output), "frames": done, "views": list(first.shape[:2]),

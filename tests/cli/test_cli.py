@@ -662,3 +662,19 @@ def test_convert_refuses_missing_views_and_keeps_frames_on_ctrl_c(capsys, tmp_pa
     code, out, _ = run(capsys, "convert", tmp_path / "src.npy", tmp_path / "part.avi", "--json")
     assert code == 130 and json.loads(out)["interrupted"] and json.loads(out)["frames"] == 2
     np.testing.assert_array_equal(lfstream.read_lf(tmp_path / "part.avi"), clip[:2])
+
+
+def test_convert_of_a_video_damaged_part_way_keeps_the_frames_before_it(capsys, tmp_path):
+    """A mosaic video cut off part way (a copy interrupted): convert writes the whole frames
+    before the damage, valid and exact, and says so in one line with exit status 2."""
+    import lfstream
+
+    clip = synth_clip(4, 3, (40, 48), seed=7, noise=2.0).lf
+    lfstream.write_lf(tmp_path / "src.avi", clip)
+    data = (tmp_path / "src.avi").read_bytes()
+    (tmp_path / "cut.avi").write_bytes(data[: int(len(data) * 0.7)])
+    code, _, err = run(capsys, "convert", tmp_path / "cut.avi", tmp_path / "out.npy")
+    assert code == 2 and "frame(s) before it written" in err and len(err.strip().splitlines()) == 1
+    kept = lfstream.read_lf(tmp_path / "out.npy")
+    assert 1 <= len(kept) < 4
+    np.testing.assert_array_equal(kept, clip[: len(kept)])
