@@ -434,6 +434,26 @@ def test_the_stream_summary_text_says_what_was_coded():
     assert "coding: fast q50 + hint 1/8\n" in _text(summary, None) + "\n"
 
 
+def test_the_stream_summary_text_points_to_avi_where_reading_was_the_bottleneck():
+    """Where reading a (lossless x264, FFV1, VP9) mosaic video was the slowest stage, the
+    text says that an .avi reads faster and how to make one; not where another stage was
+    slower, nor for other inputs."""
+    from pathlib import Path
+
+    from lfstream.cli._pipeline import _text
+
+    def summary(producer_ms):
+        stages = {name: {"frames": 4, "ms_per_frame": ms} for name, ms in
+                  (("producer", producer_ms), ("encoder", 25.0), ("decoder", 40.0), ("sink", 30.0))}
+        return {"frames": 4, "fps": 4.0, "lost": 0, "stages": stages}
+
+    note = "lfstream convert clip.mp4 clip.avi"
+    assert note in _text(summary(300.0), None, Path("clip.mp4"))
+    assert note not in _text(summary(20.0), None, Path("clip.mp4"))
+    for source in (Path("clip.avi"), Path("clip.npy"), None):
+        assert "lfstream convert" not in _text(summary(300.0), None, source)
+
+
 def test_encode_reads_a_video_frame_by_frame_into_the_streams_bytes(capsys, tmp_path, monkeypatch):
     """``lfstream encode`` of a mosaic video holds one frame at a time (its frames come from
     open_video_lf's iterator, not an array of the video) and writes what lfstream.encode
