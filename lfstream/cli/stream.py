@@ -48,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.io._fs import fresh_dir, prepare_output_dir, remove_if_made_empty
     from lfstream.stream import Pipeline, Source, file_source, render_builtin_clip, synthetic_source
     from lfstream.stream.report import stopped_summary
+    from lfstream.stream.sources import PRERENDER_MAX_FRAMES
     from lfstream.stream.transport import TcpSender, parse_address
 
     _pipeline.check_output_folder(args.output)
@@ -63,8 +64,11 @@ def run(args: argparse.Namespace) -> int:
         try:
             if args.input is None:
                 # rendered into its cache while the kernels load, where it is not there yet
+                # (and not so long that the wait would outlast them: PRERENDER_MAX_FRAMES)
+                ahead = args.frames <= PRERENDER_MAX_FRAMES
                 source = Source(synthetic_source(frames=args.frames), None, None, args.frames,
-                                prepare=lambda stop: render_builtin_clip(frames=args.frames, stop=stop))
+                                prepare=(lambda stop: render_builtin_clip(frames=args.frames, stop=stop)) if ahead
+                                else None)
             else:
                 source = file_source(args.input, read_options(args))
             cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp,

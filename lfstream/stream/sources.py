@@ -15,6 +15,10 @@ from lfstream.io.readers import ReadOptions, load_lf, open_video_lf, reads_lazil
 
 #: Bump when the renderer's output changes, so stale cached clips are not reused.
 BUILTIN_CLIP_VERSION = 1
+#: The longest built-in clip ``lfstream stream`` renders ahead, during its warm-up (about 0.4
+#: s a 7x7x375x540 frame: 48 frames in the shadow of a fresh install's ~30 s of compiling);
+#: a longer one renders as it streams on its first run, its frames flowing from the start.
+PRERENDER_MAX_FRAMES = 48
 
 
 def cache_dir() -> Path | None:
@@ -196,4 +200,5 @@ def file_source(path: str | os.PathLike, options: ReadOptions | None = None) -> 
     return Source(iter(lf), loaded.fps, present, len(lf))
 
 
-__all__ = ["BUILTIN_CLIP_VERSION", "Source", "cache_dir", "synthetic_source", "render_builtin_clip", "file_source"]
+__all__ = ["BUILTIN_CLIP_VERSION", "PRERENDER_MAX_FRAMES", "Source", "cache_dir", "synthetic_source",
+           "render_builtin_clip", "file_source"]

@@ -698,3 +698,25 @@ def test_convert_of_a_video_damaged_part_way_keeps_the_frames_before_it(capsys, 
     kept = lfstream.read_lf(tmp_path / "out.npy")
     assert 1 <= len(kept) < 4
     np.testing.assert_array_equal(kept, clip[: len(kept)])
+
+
+def test_stream_renders_a_short_builtin_clip_during_the_warm_up_only(capsys, tmp_path, monkeypatch):
+    """``lfstream stream`` gives the pipeline the built-in clip's render as ``prepare`` up to
+    PRERENDER_MAX_FRAMES frames (a longer clip renders as it streams, its frames flowing at
+    once), and never for an input file."""
+    from lfstream.stream import pipeline
+    from lfstream.stream.sources import PRERENDER_MAX_FRAMES
+
+    seen = []
+
+    def capture(self):
+        seen.append(self.prepare)
+        raise KeyboardInterrupt  # nothing runs: the stopped summary, exit 130
+
+    monkeypatch.setattr(pipeline.Pipeline, "run", capture)
+    np.save(tmp_path / "clip.npy", synth_clip(1, 3, (16, 16), seed=1).lf)
+    for k, argv in enumerate((["--frames", str(PRERENDER_MAX_FRAMES)], ["--frames", str(PRERENDER_MAX_FRAMES + 1)],
+                              [str(tmp_path / "clip.npy")])):
+        code, _, _ = run(capsys, "stream", *argv, "-o", tmp_path / f"s{k}", "--json")
+        assert code == 130
+    assert callable(seen[0]) and seen[1] is None and seen[2] is None
