@@ -143,15 +143,17 @@ def render_builtin_clip(frames: int = 24, views: int = 7, size: tuple[int, int] 
                         stop: threading.Event | None = None) -> Path | None:
     """Renders the built-in clip into its cache (:func:`synthetic_source`) where it is not
     there yet, so that a stream of it reads it back instead of rendering as it goes; returns
-    the cache file, ``None`` where there is no cache folder (nothing is rendered: the frames
-    would have to be held in memory) or ``stop`` was set first. The rendering runs numpy
+    the cache file, ``None`` where there is no cache folder or no room for the file on its
+    disk (nothing is rendered: the frames would have to be held in memory) or ``stop`` was
+    set first. The rendering runs numpy
     and OpenCV, which release the GIL: ``lfstream stream`` runs it beside the kernels'
     warm-up (:class:`lfstream.stream.Pipeline`'s ``prepare``), so a first run's count of
     frames a second is the pipeline's, not the renderer's."""
     path = _clip_cache(frames, views, size, seed)
-    if path is None:
-        return None
-    if _cached_clip(path, (frames, views, views, size[0], size[1], 3)) is None:
+    shape = (frames, views, views, size[0], size[1], 3)
+    if path is None or not (path.exists() or _fits_on_disk(path.parent, int(np.prod(shape)))):
+        return None  # nowhere to keep it: the stream renders as it goes
+    if _cached_clip(path, shape) is None:
         for _ in _render_clip(frames, views, size, seed, path, stop):
             pass
     return path if path.exists() else None

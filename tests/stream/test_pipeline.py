@@ -306,7 +306,11 @@ def test_builtin_clip_rendered_ahead_is_the_clip_the_source_reads(tmp_path, monk
     assert sources._fits_on_disk(tmp_path, 1 << 20) and not sources._fits_on_disk(tmp_path, 1 << 62)
     monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path / "full"))
     monkeypatch.setattr(sources, "_fits_on_disk", lambda folder, nbytes: False)
+    monkeypatch.setattr(sources, "_render_clip", lambda *a, **k: pytest.fail("rendered for nothing"))
     assert render_builtin_clip(**clip) is None and not list((tmp_path / "full").iterdir())
+    monkeypatch.undo()
+    monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path / "full"))
+    monkeypatch.setattr(sources, "_fits_on_disk", lambda folder, nbytes: False)
     assert all(np.array_equal(a, b) for a, b in zip(fresh, synthetic_source(**clip)))
 
 
