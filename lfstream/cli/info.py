@@ -42,7 +42,17 @@ def describe(loaded) -> dict:
         out["disparity_range"] = [float(d.min()), float(d.max())]
     if loaded.format == "lfs":
         out["stream"] = describe_stream(Path(loaded.path), loaded.frames)
+    elif loaded.format == "video" and Path(loaded.path).is_file():
+        out["video"] = describe_video(Path(loaded.path))
     return out
+
+
+def describe_video(path: Path) -> dict:
+    """How a mosaic video file is coded (what decides how fast it reads)."""
+    from lfstream.io.video import video_info
+
+    coded = video_info(path)
+    return {"codec": coded.codec, "pixel_format": coded.pixel_format, "file_bytes": path.stat().st_size}
 
 
 def describe_stream(path: Path, frames: int) -> dict:
@@ -99,6 +109,9 @@ def _text(info: dict) -> str:
     if info["has_disparity"]:
         lo, hi = info["disparity_range"]
         lines.append(f"  disparity ground truth, {lo:.3f} .. {hi:.3f} px/view")
+    c = info.get("video")
+    if c:
+        lines.append(f"  coded   {c['codec']} ({c['pixel_format']}), {c['file_bytes'] / 1e6:.1f} MB on disk")
     s = info.get("stream")
     if s:
         layers = coding_layers(s["depth_hint"], s["residual"], s["residual_mode"], s.get("hint_scale"))
@@ -139,4 +152,6 @@ def _describe_input(args: argparse.Namespace) -> dict:
            "has_weight": False, "has_disparity": False}
     if fmt == "lfs":
         out["stream"] = describe_stream(args.input, frames)
+    else:
+        out["video"] = describe_video(args.input)
     return out

@@ -100,12 +100,16 @@ class VideoInfo:
         count: frames, from the container's count or (``count_frames``) its packets;
             ``None`` where neither was asked for nor recorded.
         size: ``(H, W)`` of a frame as the readers return it (a padded frame's true size).
+        codec: the video stream's codec (FFmpeg's name: ``h264``, ``utvideo``, ``ffv1``, ...).
+        pixel_format: its pixel format (``gbrp``/``bgr0`` exact RGB, ``yuv420p`` lossy).
     """
 
     grid: tuple[int, int] | None
     fps: float | None
     count: int | None
     size: tuple[int, int]
+    codec: str | None = None
+    pixel_format: str | None = None
 
 
 def video_info(path: Path, count_frames: bool = False) -> VideoInfo:
@@ -124,7 +128,9 @@ def video_info(path: Path, count_frames: bool = False) -> VideoInfo:
             except Exception as exc:  # noqa: BLE001 - PyAV's errors: a damaged file
                 raise LFFormatError(f"{path}: not a readable video ({exc})") from exc
         size = _parse_pair(SIZE_METADATA_PREFIX, tags.get(GRID_METADATA_KEY)) or (stream.height, stream.width)
-        return VideoInfo(_parse_pair(GRID_METADATA_PREFIX, tags.get(GRID_METADATA_KEY)), fps, count, size)
+        ctx = stream.codec_context
+        return VideoInfo(_parse_pair(GRID_METADATA_PREFIX, tags.get(GRID_METADATA_KEY)), fps, count, size,
+                         ctx.name, getattr(ctx.format, "name", None))
 
 
 def video_grid_and_fps(path: Path) -> tuple[tuple[int, int] | None, float | None]:

@@ -720,3 +720,18 @@ def test_stream_renders_a_short_builtin_clip_during_the_warm_up_only(capsys, tmp
         code, _, _ = run(capsys, "stream", *argv, "-o", tmp_path / f"s{k}", "--json")
         assert code == 130
     assert callable(seen[0]) and seen[1] is None and seen[2] is None
+
+
+def test_info_names_a_videos_codec_and_pixel_format(capsys, tmp_path):
+    """``info`` of a mosaic video says how it is coded (what decides how fast it reads)."""
+    import lfstream
+
+    clip = synth_clip(1, 3, (24, 32), seed=8).lf
+    for name, codec, pix in (("a.avi", "utvideo", "gbrp"), ("a.mp4", "h264", "gbrp"), ("a.mkv", "ffv1", "bgr0")):
+        lfstream.write_lf(tmp_path / name, clip)
+        code, out, _ = run(capsys, "info", tmp_path / name, "--json")
+        video = json.loads(out)["video"]
+        assert code == 0 and video["codec"] == codec and video["pixel_format"] == pix
+        assert video["file_bytes"] == (tmp_path / name).stat().st_size
+        code, out, _ = run(capsys, "info", tmp_path / name)
+        assert f"coded   {codec} ({pix})" in out
