@@ -19,22 +19,22 @@ import numpy as np
 from lfstream.io.readers import ReadOptions
 
 
-def parse_grid(text: str) -> tuple[int, int]:
-    """Parses ``UxV`` (or ``N``) into a view grid."""
+def parse_grid(text: str, what: str = "grid", example: str = "7x7") -> tuple[int, int]:
+    """Parses ``UxV`` (or ``N``) into a view grid (``what``/``example``: the message's words)."""
     try:
         parts = [int(p) for p in text.lower().split("x")]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"grid must look like 7x7, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"{what} must look like {example}, got {text!r}") from None
     if len(parts) == 1:
         parts = parts * 2
     if len(parts) != 2 or min(parts) < 1:
-        raise argparse.ArgumentTypeError(f"grid must look like 7x7, got {text!r}")
+        raise argparse.ArgumentTypeError(f"{what} must look like {example}, got {text!r}")
     return parts[0], parts[1]
 
 
 def parse_size(text: str) -> tuple[int, int]:
     """Parses ``HxW``."""
-    return parse_grid(text)
+    return parse_grid(text, "size (HxW)", "375x540")
 
 
 def parse_float_list(text: str) -> list[float]:

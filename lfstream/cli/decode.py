@@ -38,11 +38,13 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.codec.decoder import frames_array, iter_decode, video_array
     from lfstream.errors import BitstreamError, LFFileError
     from lfstream.io import FrameWriter, write_lf, write_pfm
-    from lfstream.io._fs import check_new_file
+    from lfstream.io._fs import check_new_file, prepare_output_dir
 
     check_new_file(args.output, args.overwrite)
     if args.disparity_out is not None:
-        args.disparity_out.mkdir(parents=True, exist_ok=True)
+        # a new or empty folder (or --overwrite): maps of an earlier decode are not replaced
+        # unasked, and a file there is one line, not a traceback
+        prepare_output_dir(args.disparity_out, args.overwrite)
     # a video, a folder or a .npy is written frame by frame as the frames are decoded (one
     # frame in memory; a video at the stream's frame rate; a .npy sized by the packets
     # counted first); a .npz takes them together at the end (its members are compressed

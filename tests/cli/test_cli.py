@@ -735,3 +735,29 @@ def test_info_names_a_videos_codec_and_pixel_format(capsys, tmp_path):
         assert video["file_bytes"] == (tmp_path / name).stat().st_size
         code, out, _ = run(capsys, "info", tmp_path / name)
         assert f"coded   {codec} ({pix})" in out
+
+
+def test_decode_disparity_out_is_a_new_or_empty_folder(capsys, tmp_path):
+    """``decode --disparity-out``: a file there is one line (it was a FileExistsError
+    traceback), a folder holding an earlier decode's maps is kept unless --overwrite."""
+    import lfstream
+
+    (tmp_path / "c.lfs").write_bytes(lfstream.encode(synth_clip(2, 3, (24, 32), seed=9).lf))
+    (tmp_path / "afile").write_text("mine")
+    code, _, err = run(capsys, "decode", tmp_path / "c.lfs", "-o", tmp_path / "a.npy", "--disparity-out",
+                       tmp_path / "afile")
+    assert code == 2 and "afile" in err and len(err.strip().splitlines()) == 1
+    assert (tmp_path / "afile").read_text() == "mine"
+    code, _, _ = run(capsys, "decode", tmp_path / "c.lfs", "-o", tmp_path / "b.npy", "--disparity-out", tmp_path / "d")
+    assert code == 0 and sorted(p.name for p in (tmp_path / "d").iterdir()) == ["frame_000000.pfm", "frame_000001.pfm"]
+    code, _, err = run(capsys, "decode", tmp_path / "c.lfs", "-o", tmp_path / "c.npy", "--disparity-out", tmp_path / "d")
+    assert code == 2 and "not an empty folder" in err
+    code, _, _ = run(capsys, "decode", tmp_path / "c.lfs", "-o", tmp_path / "c.npy", "--disparity-out", tmp_path / "d",
+                     "--overwrite")
+    assert code == 0
+
+
+def test_a_bad_size_says_size(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["demo", "--size", "0x0"])
+    assert e.value.code == 2 and "size (HxW) must look like 375x540" in capsys.readouterr().err
