@@ -44,7 +44,10 @@ def run(args: argparse.Namespace) -> int:
     fps = args.fps or source.fps or 30.0
     t0 = time.perf_counter()
     done, interrupted = 0, False
-    if ext == ".npz":
+    # a .npz is compressed whole; a float light field read whole goes to a .npy as it is
+    # (frame by frame, the writers take 8 bits)
+    keeps_dtype = ext == ".npy" and source.whole is not None and source.whole.dtype != np.uint8
+    if ext == ".npz" or keeps_dtype:
         lf = source.whole if source.whole is not None else np.stack(list(source.frames))
         write_lf(args.output, lf, fps=fps, overwrite=args.overwrite)
         done = len(lf)
@@ -55,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
             try:
                 for lf in source.frames:
                     with interrupt_after():  # a frame is written whole
-                        writer.write(np.ascontiguousarray(lf))
+                        writer.write(_as_written(lf, f"{args.input} frame {done}"))
                         done += 1
             except KeyboardInterrupt:  # Ctrl-C: the frames so far, the output finalised
                 interrupted = True
@@ -78,3 +81,19 @@ def run(args: argparse.Namespace) -> int:
     emit(args, result, lambda r: f"{done} frame(s) of {r['views'][0]}x{r['views'][1]} views, {r['size'][0]}x{r['size'][1]}, "
          f"in {seconds:.2f} s -> {args.output}" + (" (interrupted)" if interrupted else ""))
     return 130 if interrupted else 0
+
+
+def _as_written(lf, name: str):
+    """A frame as the frame writers store it, 8 bits: a float light field in [0, 1] rounded
+    to uint8 (checked finite and in range first: nothing far out of range is clipped
+    silently)."""
+    import numpy as np
+
+    from lfstream.lightfield import check_finite, check_unit_range, to_uint8
+
+    lf = np.asarray(lf)
+    if lf.dtype == np.uint8:
+        return np.ascontiguousarray(lf)
+    check_finite(lf, name)
+    check_unit_range(lf, name)
+    return np.ascontiguousarray(to_uint8(lf))

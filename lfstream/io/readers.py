@@ -210,6 +210,19 @@ def _read_rgb_view(p: Path) -> np.ndarray:
 _ARRAY_MAGIC = {".npy": (b"\x93NUMPY", "a NumPy .npy file"), ".npz": (b"PK", "a NumPy .npz (zip) archive")}
 
 
+def _check_declared_size(fh, available: int, name: str) -> None:
+    """Refuses an array whose header declares more data than its file holds (a truncated or
+    forged ``.npy``: numpy would first try to allocate what the header says, up to
+    petabytes). ``fh`` is at the array's magic; ``available``: its bytes, header included."""
+    version = np.lib.format.read_magic(fh)
+    read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+    shape, _, dtype = read_header(fh)
+    declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if declared > available - fh.tell():
+        raise LFFormatError(f"{name}: its header declares a {'x'.join(map(str, shape))} {dtype} array ({declared} "
+                            f"bytes), the file holds {max(available - fh.tell(), 0)}: truncated or not an array file")
+
+
 def _read_array_file(path: Path) -> LoadedLF:
     magic, what = _ARRAY_MAGIC[path.suffix.lower()]
     try:
@@ -221,6 +234,8 @@ def _read_array_file(path: Path) -> LoadedLF:
         raise LFFormatError(f"{path}: not {what} ({'empty file' if not head else 'its first bytes are ' + repr(head)})")
     try:
         if path.suffix.lower() == ".npy":
+            with open(path, "rb") as fh:
+                _check_declared_size(fh, path.stat().st_size, str(path))
             lf = np.load(path, allow_pickle=False)
             disparity = None
             fmt = "npy"
@@ -230,10 +245,14 @@ def _read_array_file(path: Path) -> LoadedLF:
                 if not keys:
                     raise LFFormatError(f"{path}: empty .npz archive")
                 key = "lf" if "lf" in keys else keys[0]
+                for name in {key, "disparity"} & set(keys):
+                    member = z.zip.getinfo(f"{name}.npy")
+                    with z.zip.open(member) as fh:
+                        _check_declared_size(fh, member.file_size, f"{path} ({name})")
                 lf = z[key]
                 disparity = z["disparity"] if "disparity" in keys else None
             fmt = "npz"
-    except (ValueError, OSError, EOFError) as exc:
+    except (ValueError, OSError, EOFError, KeyError) as exc:
         if isinstance(exc, LFFormatError):
             raise
         raise LFFormatError(f"{path}: not a readable {path.suffix} array ({exc})") from exc

@@ -761,3 +761,20 @@ def test_a_bad_size_says_size(capsys):
     with pytest.raises(SystemExit) as e:
         main(["demo", "--size", "0x0"])
     assert e.value.code == 2 and "size (HxW) must look like 375x540" in capsys.readouterr().err
+
+
+def test_convert_rounds_a_float_light_field_for_8_bit_formats(capsys, tmp_path):
+    """A float light field in [0, 1] goes into a video as lfstream's to_uint8 rounds it (a
+    .npy keeps the floats); one in 8-bit units is refused in one line, nothing written."""
+    import lfstream
+    from lfstream.lightfield import to_uint8
+
+    lf = np.random.default_rng(3).random((2, 3, 3, 16, 16, 3)).astype(np.float32)
+    np.save(tmp_path / "f.npy", lf)
+    assert run(capsys, "convert", tmp_path / "f.npy", tmp_path / "f.avi")[0] == 0
+    np.testing.assert_array_equal(lfstream.read_lf(tmp_path / "f.avi"), to_uint8(lf))
+    assert run(capsys, "convert", tmp_path / "f.npy", tmp_path / "g.npy")[0] == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "g.npy"), lf)
+    np.save(tmp_path / "units.npy", lf * 255)
+    code, _, err = run(capsys, "convert", tmp_path / "units.npy", tmp_path / "u.avi")
+    assert code == 2 and "divide by 255" in err and not (tmp_path / "u.avi").exists()

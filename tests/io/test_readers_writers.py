@@ -255,3 +255,30 @@ def test_frame_writer_keeps_nothing_torn(tmp_path, rng):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.npy", "stopped.mp4", "stopped.npy"]
     with pytest.raises(LFFileError, match="already exists"):
         FrameWriter(tmp_path / "stopped.mp4")
+
+
+def test_an_array_file_whose_header_promises_more_than_it_holds_is_refused(tmp_path):
+    """A truncated .npy, or a forged header (a shape of petabytes): one LFFormatError naming
+    the file and the declared size, before numpy tries to allocate it; the same for the
+    light field inside an .npz."""
+    import zipfile
+
+    from lfstream.errors import LFFormatError
+    from lfstream.io import read_lf
+
+    whole = tmp_path / "whole.npy"
+    np.save(whole, np.zeros((3, 3, 8, 8, 3), np.uint8))
+    data = whole.read_bytes()
+    (tmp_path / "cut.npy").write_bytes(data[:-10])
+    header = np.lib.format.header_data_from_array_1_0(np.zeros((1,), np.uint8))
+    header["shape"] = (100000, 100000, 100000, 7, 7, 3)
+    forged = tmp_path / "forged.npy"
+    with open(forged, "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, header)
+        fh.write(b"\0" * 64)
+    with zipfile.ZipFile(tmp_path / "forged.npz", "w") as z:
+        z.writestr("lf.npy", forged.read_bytes())
+    for name in ("cut.npy", "forged.npy", "forged.npz"):
+        with pytest.raises(LFFormatError, match="header declares"):
+            read_lf(tmp_path / name)
+    assert read_lf(whole).shape == (3, 3, 8, 8, 3)
