@@ -13,9 +13,10 @@ HELP = "convert a light field or LF video to another format (e.g. an .mp4 mosaic
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path, help="any light field lfstream reads (an .lfs is decoded as lfstream decode does)")
-    p.add_argument("output", type=Path, help=".npy (T,U,V,H,W,3), .npz, a mosaic video (.avi/.nut Ut Video, .mp4 "
-                   "x264 RGB, .mkv FFV1: lossless) or a folder of R_C.png views")
-    p.add_argument("--lossy", action="store_true", help="a video as x264 yuv420p (plays everywhere; not exact)")
+    p.add_argument("output", type=Path, help=".npy (T,U,V,H,W,3), .npz, a mosaic video (lossless: .avi/.nut Ut Video, "
+                   ".mp4/.mov x264 RGB, .mkv FFV1, .webm VP9) or a folder of R_C.png views")
+    p.add_argument("--lossy", action="store_true", help="a video as yuv420p x264 (VP9 in .webm): plays everywhere, "
+                   "not exact")
     p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate of a video (default: the input's, else 30)")
     p.add_argument("--overwrite", action="store_true")
     add_read_options(p)
