@@ -42,7 +42,7 @@ LOSSLESS_X264 = {"qp": "0", "preset": "faster", "tune": "fastdecode"}
 #: Huffman-coded: the quickest to read). Measured on the 2-core Zen 5 EPYC, 7x7x375x540
 #: mosaics (bench/video_io.py), reading a frame (wall / CPU) and its size: the built-in
 #: clip's noisy frames x264 152-185 / 267-315 ms, 12.8 MB; FFV1 252 / 490 ms, 11.2 MB; Ut
-#: Video 41-50 / 46-53 ms, 13.2 MB; lytro_bikes' views x264 177 / 197 ms, 6.0 MB, Ut Video
+#: Video 41-57 / 46-63 ms, 13.2 MB; lytro_bikes' views x264 177 / 197 ms, 6.0 MB, Ut Video
 #: 34 / 58 ms, 15.8 MB (without noise x264's predictions pay; frames that repeat cost it
 #: almost nothing). So ``.avi`` is the format to stream from disk, ``.mp4`` to keep.
 LOSSLESS_CODECS = {".mkv": ("ffv1", "bgr0"), ".avi": ("utvideo", "gbrp"), ".nut": ("utvideo", "gbrp")}

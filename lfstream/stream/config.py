@@ -21,7 +21,8 @@ FOCUS_MODES = ("auto", "seed")
 TRANSPORTS = ("inproc", "file", "tcp")
 #: mp4: one H.264 yuv420p video per focal plane (plays everywhere); mp4-lossless: the same
 #: losslessly (x264 RGB, QP 0) for regression use; png: every plane of every frame; sweep:
-#: one video stepping through the planes; lf: the reconstructed light field (FFV1 mosaic).
+#: one video stepping through the planes; lf: the reconstructed light field
+#: (``reconstructed.avi``, a lossless Ut Video mosaic).
 SAVE_KINDS = ("mp4", "mp4-lossless", "png", "sweep", "lf")
 #: Frames per network batch in the stream's decoder, and bounded-queue sizes.
 BATCH_RANGE = (1, 64)
