@@ -57,7 +57,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lfstream.codec.encoder import Encoder, encode_file, with_default_hance_map, write_stream_file
-    from lfstream.codec.rate import choose_default, uses_default_choice
+    from lfstream.codec.rate import RATE_CONTROL_CHOOSES, choose_default, rate_control_conflict, uses_default_choice
     from lfstream.errors import LFValueError
     from lfstream.io._fs import check_new_file
     from lfstream.metrics import bpp
@@ -65,6 +65,14 @@ def run(args: argparse.Namespace) -> int:
 
     check_new_file(args.output, args.overwrite)
     check_device(args.device)  # a bad device fails before any reading or encoding
+    # options that do not go together fail before the input is read (whole, for --bpp)
+    if args.bpp is not None:
+        conflict = rate_control_conflict(args.residual, args.residual_mode, hance_map=args.hance_map)
+        if conflict:
+            flag = "--" + conflict.replace("_", "-")
+            raise LFValueError(f"{flag}: rate control (--bpp) {RATE_CONTROL_CHOOSES[conflict]}")
+    if args.residual_mode != "prediction" and args.residual is None:
+        raise LFValueError("--residual-mode: needs --residual Q (the layer's quality)")
     # rate control (--bpp) encodes every frame while it searches: it reads the input whole
     source = read_input(args, whole=args.bpp is not None)
     frames, present, views, size = source.frames, source.present, source.first.shape[:2], source.first.shape[2:4]
@@ -74,12 +82,6 @@ def run(args: argparse.Namespace) -> int:
     prediction_db = None  # the default's check of its own prediction (rate.choose_default)
     hance_mapped = False  # strength maps sent (not where the default codes the views themselves)
     hint_scale = HintOptions().hint_scale  # the hint's resolution divisor (the default may double it)
-    if args.bpp is not None and (residual is not None or residual_mode != "prediction"):
-        raise LFValueError("--residual: rate control (--bpp) chooses the residual layer itself; give one or the other")
-    if residual_mode != "prediction" and residual is None:
-        raise LFValueError("--residual-mode: needs --residual Q (the layer's quality)")
-    if args.hance_map and args.bpp is not None:
-        raise LFValueError("--hance-map: not with --bpp, whose configurations it does not measure")
     if args.bpp is not None:
         from lfstream.codec.rate import choose_configuration
 

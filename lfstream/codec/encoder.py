@@ -464,14 +464,11 @@ def encode(
             raise
         raise LFValueError(f"lf: not an array ({exc})") from exc
     if bpp is not None:
-        from lfstream.codec.rate import choose_configuration
+        from lfstream.codec.rate import RATE_CONTROL_CHOOSES, choose_configuration, rate_control_conflict
 
-        if residual is not None or residual_mode != "prediction":
-            raise LFValueError("residual: rate control (bpp) chooses the residual layer itself; give one or the other")
-        if not post_filter:
-            raise LFValueError("post_filter: rate control (bpp) names the post-filter itself; give one or the other")
-        if hance_map:
-            raise LFValueError("hance_map: not with rate control (bpp), whose configurations it does not measure")
+        conflict = rate_control_conflict(residual, residual_mode, post_filter, hance_map)
+        if conflict:
+            raise LFValueError(f"{conflict}: rate control (bpp) {RATE_CONTROL_CHOOSES[conflict]}")
         # rate control encoded every frame already: its stream is the answer
         return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream()
     from lfstream.codec.rate import choose_default, uses_default_choice

@@ -217,6 +217,30 @@ def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, prese
     return float(np.mean(psnr(grids[1:, ..., None], pred.astype(np.float32) / np.float32(255.0), 1.0)))
 
 
+#: What rate control (a ``bpp`` target) chooses itself, and so refuses beside it: option ->
+#: why (the callers put their own names to it: ``residual`` / ``--residual``).
+RATE_CONTROL_CHOOSES = {
+    "residual": "chooses the residual layer itself; give one or the other",
+    "post_filter": "names the post-filter itself; give one or the other",
+    "hance_map": "does not measure its configurations with JPEG-Hance strength maps; give one or the other",
+}
+
+
+def rate_control_conflict(residual: int | None = None, residual_mode: str = "prediction", post_filter: bool = True,
+                          hance_map: bool = False) -> str | None:
+    """The first option given beside a ``bpp`` target that rate control chooses itself
+    (:data:`RATE_CONTROL_CHOOSES`: ``"residual"``, ``"post_filter"``, ``"hance_map"``), or
+    ``None``: the one check behind :func:`lfstream.encode`, ``lfstream encode`` and the
+    stream's configuration."""
+    if residual is not None or residual_mode != "prediction":
+        return "residual"
+    if not post_filter:
+        return "post_filter"
+    if hance_map:
+        return "hance_map"
+    return None
+
+
 def default_preset(views: tuple[int, int], size: tuple[int, int]) -> str:
     """The default's preset for ``views`` ``(U, V)`` of ``size`` ``(H, W)``
     (:data:`DEFAULT_PRESET_BY_VIEWS`; ``fast`` where the views are too small for AV1)."""
@@ -689,7 +713,8 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     return _choice(candidates, target_bpp)
 
 
-__all__ = ["RATE_TOLERANCE", "SEARCHES", "QUICK_MAX_CENTRE_QUALITY", "QUICK_HINT_SHARE", "PROBE_NEAR",
+__all__ = ["RATE_CONTROL_CHOOSES", "rate_control_conflict",
+           "RATE_TOLERANCE", "SEARCHES", "QUICK_MAX_CENTRE_QUALITY", "QUICK_HINT_SHARE", "PROBE_NEAR",
            "COARSE_HINT_SCALE", "RESIDUAL_SHARES", "RESIDUAL_PRESET", "FOLLOW_MAX_STEP",
            "FOLLOW_DEADBAND", "FOLLOW_STEP_GROWTH", "PREDICTION_FLOOR_DB", "PREDICTION_CHECK_MIN_CELLS",
            "HINT_COARSEN_MAX_LOSS_DB", "HINT_COARSEN_DB_PER_PERCENT", "coarsening_allowance",

@@ -104,15 +104,17 @@ class StreamConfig:
             check_choice("preset", self.preset, tuple(PRESETS))
         if self.residual is not None:
             check_range("residual", self.residual, QUALITY_RANGE)
-            if self.bpp is not None:
-                raise LFValueError("residual: rate control (bpp) chooses the residual layer itself; give one or the other")
         check_choice("residual_mode", self.residual_mode, RESIDUAL_MODES)
+        if self.bpp is not None:
+            from lfstream.codec.rate import RATE_CONTROL_CHOOSES, rate_control_conflict
+
+            conflict = rate_control_conflict(self.residual, self.residual_mode, hance_map=self.hance_map)
+            if conflict:
+                raise LFValueError(f"{conflict}: rate control (bpp) {RATE_CONTROL_CHOOSES[conflict]}")
         if self.hance_map:
-            if self.bpp is not None:
-                raise LFValueError("hance_map: not with rate control (bpp), whose configurations it does not measure")
             self.encoder()  # refuses a coding the maps do not go with (an AV1 centre, a residual layer)
-        if self.residual_mode != "prediction" and (self.residual is None or self.bpp is not None):
-            raise LFValueError(f"residual_mode {self.residual_mode!r}: needs a residual quality (and no bpp)")
+        if self.residual_mode != "prediction" and self.residual is None:
+            raise LFValueError(f"residual_mode {self.residual_mode!r}: needs a residual quality")
         if isinstance(self.alphas, str):
             check_choice("alphas", self.alphas, FOCUS_MODES)
         else:

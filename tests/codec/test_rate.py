@@ -432,3 +432,32 @@ def test_rate_control_skips_half_size_views_that_av1_cannot_code(views):
     data = lfstream.encode(lf, bpp=0.5)
     assert lfstream.decode(data)[0].shape == lf.shape
     assert abs(bpp(len(data), lf.shape) - 0.5) / 0.5 <= RATE_TOLERANCE
+
+
+def test_rate_control_refuses_what_it_chooses_itself_in_one_place(capsys, tmp_path):
+    """One rule (rate_control_conflict) behind lfstream.encode, lfstream encode and the
+    stream's configuration: a residual layer, the post-filter off or JPEG-Hance maps beside
+    a bpp target are refused, naming the option as each caller spells it; the command
+    refuses before it reads its input (a whole read for --bpp)."""
+    from lfstream.codec.rate import rate_control_conflict
+    from lfstream.stream import StreamConfig
+
+    assert rate_control_conflict() is None
+    assert rate_control_conflict(residual=40) == "residual"
+    assert rate_control_conflict(residual_mode="views") == "residual"
+    assert rate_control_conflict(post_filter=False) == "post_filter"
+    assert rate_control_conflict(hance_map=True) == "hance_map"
+    lf = np.zeros((3, 3, 16, 16, 3), np.uint8)
+    for kwargs, name in (({"residual": 40}, "residual"), ({"post_filter": False}, "post_filter"),
+                         ({"hance_map": True}, "hance_map")):
+        with pytest.raises(LFValueError, match=f"^{name}: rate control"):
+            lfstream.encode(lf, bpp=0.05, **kwargs)
+    with pytest.raises(LFValueError, match="^hance_map: rate control"):
+        StreamConfig(bpp=0.05, hance_map=True).validate()
+    with pytest.raises(LFValueError, match="^residual: rate control"):
+        StreamConfig(bpp=0.05, residual=40).validate()
+    missing = tmp_path / "not-there.npy"
+    for flags, flag in ((["--hance-map"], "--hance-map"), (["--residual", "40"], "--residual")):
+        assert main(["encode", str(missing), "-o", str(tmp_path / "x.lfs"), "--bpp", "0.05", *flags]) == 2
+        err = capsys.readouterr().err
+        assert f"{flag}: rate control (--bpp)" in err and "not-there" not in err
