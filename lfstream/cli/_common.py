@@ -151,7 +151,7 @@ def read_input(args: argparse.Namespace, whole: bool = False, count_frames: bool
         if first is None:
             raise LFFormatError(f"{args.input}: contains no frames")
         check_lf(first)  # checked as a light field read whole is
-        return InputFrames(first, itertools.chain([first], video.frames), video.count, None, None, video.fps)
+        return InputFrames(first, itertools.chain([first], video.frames), video.count, None, video.present, video.fps)
     loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
     check_lf(loaded.lf)
     lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]

@@ -145,13 +145,14 @@ def _describe_input(args: argparse.Namespace) -> dict:
     video = open_video_lf(args.input, read_options(args), count_frames=True)
     if not video.count:
         raise LFFormatError(f"{args.input}: contains no frames")
-    fmt = "video" if args.input.suffix.lower() in VIDEO_EXTS else "lfs"
+    fmt = "view-videos" if args.input.is_dir() else "video" if args.input.suffix.lower() in VIDEO_EXTS else "lfs"
     (u, v), (h, w), frames = video.views, video.size, video.count
+    missing = None if video.present is None else [[int(r), int(c)] for r, c in zip(*np.nonzero(~video.present))]
     out = {"path": str(args.input), "format": fmt, "frames": frames, "views": [u, v], "size": [h, w], "channels": 3,
-           "dtype": "uint8", "bytes": frames * u * v * h * w * 3, "fps": video.fps, "missing_views": None,
+           "dtype": "uint8", "bytes": frames * u * v * h * w * 3, "fps": video.fps, "missing_views": missing,
            "has_weight": False, "has_disparity": False}
     if fmt == "lfs":
         out["stream"] = describe_stream(args.input, frames)
-    else:
+    elif fmt == "video":
         out["video"] = describe_video(args.input)
     return out

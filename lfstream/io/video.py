@@ -63,14 +63,18 @@ def _open_container(path: Path):
         raise LFFormatError(f"{path}: not a readable video ({exc})") from exc
 
 
-def iter_video_frames(path: Path, max_frames: int | None = None) -> Iterator[np.ndarray]:
-    """Yields the frames of a video file as uint8 RGB ``(H, W, 3)``."""
+def iter_video_frames(path: Path, max_frames: int | None = None, threads: int | None = None) -> Iterator[np.ndarray]:
+    """Yields the frames of a video file as uint8 RGB ``(H, W, 3)``; ``threads``: the
+    decoder's threads (``None``: FFmpeg's choice; 1 where many small videos are decoded side
+    by side, one view each, and their threads would only crowd the cores)."""
     import av
 
     with _open_container(path) as container:
         if not container.streams.video:
             raise LFFormatError(f"{path}: has no video stream")
         stream = container.streams.video[0]
+        if threads is not None:
+            stream.codec_context.thread_count = int(threads)
         size = _parse_pair(SIZE_METADATA_PREFIX, _tags(container).get(GRID_METADATA_KEY))
         try:
             for i, frame in enumerate(container.decode(stream)):

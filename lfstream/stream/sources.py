@@ -189,7 +189,9 @@ def file_source(path: str | os.PathLike, options: ReadOptions | None = None) -> 
     if reads_lazily(path):
         # frame by frame, crop and flips applied (the flips were once skipped here)
         video = open_video_lf(path, opts)
-        return Source(video.frames, video.fps, None, video.count or opts.max_frames)
+        if video.present is not None and not video.present[video.views[0] // 2, video.views[1] // 2]:
+            raise LFValueError(f"{path}: the centre view is missing; it is the view the codec sends")
+        return Source(video.frames, video.fps, video.present, video.count or opts.max_frames)
     loaded = load_lf(path, opts)
     present = loaded.present
     if present is not None and present.all():

@@ -778,3 +778,32 @@ def test_convert_rounds_a_float_light_field_for_8_bit_formats(capsys, tmp_path):
     np.save(tmp_path / "units.npy", lf * 255)
     code, _, err = run(capsys, "convert", tmp_path / "units.npy", tmp_path / "u.avi")
     assert code == 2 and "divide by 255" in err and not (tmp_path / "u.avi").exists()
+
+
+def test_a_folder_of_view_videos_streams_and_is_described_without_decoding(capsys, tmp_path, monkeypatch):
+    """A camera array's video (one file per view): ``info`` reads the containers only (the
+    missing views too, with --allow-missing), ``stream`` and ``convert`` take it frame by
+    frame, and a folder without the centre view is refused in one line."""
+    import lfstream.io.readers as readers
+    from lfstream.io import write_video
+
+    clip = synth_clip(3, 3, (24, 32), seed=10).lf
+    folder = tmp_path / "array"
+    folder.mkdir()
+    for u in range(3):
+        for v in range(3):
+            if (u, v) != (0, 1):
+                write_video(folder / f"{u}_{v}.mp4", list(clip[:, u, v]))
+    real = readers.iter_video_frames
+    monkeypatch.setattr(readers, "iter_video_frames", lambda *a, **k: (_ for _ in ()).throw(AssertionError("decoded")))
+    code, out, _ = run(capsys, "info", folder, "--allow-missing", "--json")
+    info = json.loads(out)
+    assert code == 0 and info["format"] == "view-videos" and info["frames"] == 3 and info["missing_views"] == [[0, 1]]
+    monkeypatch.setattr(readers, "iter_video_frames", real)
+    code, out, _ = run(capsys, "stream", folder, "--allow-missing", "-o", tmp_path / "s", "--json")
+    assert code == 0 and json.loads(out)["frames"] == 3
+    code, _, err = run(capsys, "convert", folder, tmp_path / "c.avi", "--allow-missing")
+    assert code == 2 and "missing" in err
+    (folder / "1_1.mp4").unlink()
+    code, _, err = run(capsys, "stream", folder, "--allow-missing", "-o", tmp_path / "t")
+    assert code == 2 and "centre view is missing" in err and len(err.strip().splitlines()) == 1

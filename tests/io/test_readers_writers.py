@@ -282,3 +282,67 @@ def test_an_array_file_whose_header_promises_more_than_it_holds_is_refused(tmp_p
         with pytest.raises(LFFormatError, match="header declares"):
             read_lf(tmp_path / name)
     assert read_lf(whole).shape == (3, 3, 8, 8, 3)
+
+
+def _view_video_folder(folder, video, skip=(), sizes=None, frames=None):
+    """A folder of one lossless video per view of ``video`` (T, U, V, H, W, 3)."""
+    folder.mkdir()
+    for u in range(video.shape[1]):
+        for v in range(video.shape[2]):
+            if (u, v) in skip:
+                continue
+            clip = video[: (frames or {}).get((u, v), len(video)), u, v]
+            if sizes and (u, v) in sizes:
+                clip = np.ascontiguousarray(clip[:, : sizes[(u, v)][0], : sizes[(u, v)][1]])
+            write_video(folder / f"{u}_{v}.mkv", list(clip))
+    return folder
+
+
+def test_a_folder_of_view_videos_is_read_frame_by_frame(tmp_path, rng, monkeypatch):
+    """A camera array's video (one file per view) reads lazily as an LF video: frame by frame
+    the same light fields as read whole, crop and flips applied, each view's decoder on
+    VIEW_DECODER_THREADS threads; missing views with their mask (allow_missing) or refused; views of different
+    sizes or frame counts refused from their containers before any frame is decoded."""
+    import lfstream.io.video as video_mod
+    from lfstream.errors import LFMissingViewsError
+    from lfstream.io import ReadOptions, open_video_lf, reads_lazily
+    from lfstream.io.readers import VIEW_DECODER_THREADS
+
+    video = random_lf(rng, (4, 3, 3, 8, 12, 3))
+    folder = _view_video_folder(tmp_path / "views", video)
+    assert reads_lazily(folder) and not reads_lazily(tmp_path)
+    threads = []
+    real = video_mod.iter_video_frames
+
+    def spy(path, max_frames=None, threads_=None, **kwargs):
+        threads.append(kwargs.get("threads", threads_))
+        return real(path, max_frames, **kwargs)
+
+    monkeypatch.setattr("lfstream.io.readers.iter_video_frames", spy)
+    assert open_video_lf(folder).count is None  # Matroska keeps no count; counted where asked
+    lazy = open_video_lf(folder, count_frames=True)
+    assert (lazy.views, lazy.size, lazy.count, lazy.present) == ((3, 3), (8, 12), 4, None)
+    np.testing.assert_array_equal(np.stack(list(lazy.frames)), video)
+    assert threads == [VIEW_DECODER_THREADS] * 9  # the first open decoded nothing
+    np.testing.assert_array_equal(read_lf(folder), video)
+    flipped = open_video_lf(folder, ReadOptions(flip_u=True, max_frames=2), count_frames=True)
+    assert flipped.count == 2
+    np.testing.assert_array_equal(np.stack(list(flipped.frames)), video[:2, ::-1])
+    cropped = open_video_lf(folder, ReadOptions(crop=1))
+    np.testing.assert_array_equal(np.stack(list(cropped.frames)), video[:, 1:2, 1:2])
+    holes = _view_video_folder(tmp_path / "holes", video, skip={(0, 2)})
+    with pytest.raises(LFMissingViewsError):
+        open_video_lf(holes)
+    masked = open_video_lf(holes, ReadOptions(allow_missing=True))
+    assert masked.present is not None and not masked.present[0, 2] and masked.present.sum() == 8
+    got = np.stack(list(masked.frames))
+    assert not got[:, 0, 2].any()
+    np.testing.assert_array_equal(np.delete(got.reshape(4, 9, 8, 12, 3), 2, axis=1),
+                                  np.delete(video.reshape(4, 9, 8, 12, 3), 2, axis=1))
+    np.testing.assert_array_equal(read_lf(holes, return_mask=True)[1], masked.present)
+    sized = _view_video_folder(tmp_path / "sized", video, sizes={(1, 1): (8, 10)})
+    with pytest.raises(LFShapeError, match="1_1"):
+        open_video_lf(sized)
+    short = _view_video_folder(tmp_path / "short", video, frames={(2, 0): 3})
+    with pytest.raises((LFShapeError, LFFormatError), match="2_0"):
+        list(open_video_lf(short, count_frames=True).frames)
