@@ -294,10 +294,28 @@ def reads_lazily(path: str | os.PathLike) -> bool:
     path = Path(path)
     if path.is_dir():
         try:
-            return _classify_folder(path) == "view-videos"
-        except LFFormatError:
+            return _lazy_folder_kind(path) is not None
+        except (LFFormatError, OSError):
             return False
     return path.suffix.lower() in LAZY_EXTS and path.is_file()
+
+
+def _frame_entries(folder: Path) -> list[Path]:
+    """A frames folder's entries in name order (hidden ones left out)."""
+    return sorted(p for p in folder.iterdir() if not p.name.startswith("."))
+
+
+def _lazy_folder_kind(folder: Path) -> str | None:
+    """``"view-videos"`` (one video per view) or ``"frame-folders"`` (one sub-folder of view
+    images per frame, as :func:`lfstream.io.write_lf` and ``lfstream decode`` write a video),
+    which :func:`open_video_lf` reads frame by frame; ``None`` for other folders (read whole)."""
+    kind = _classify_folder(folder)
+    if kind == "view-videos":
+        return kind
+    entries = _frame_entries(folder) if kind == "frames-folder" else []
+    if entries and all(p.is_dir() for p in entries) and _classify_folder(entries[0]) == "sai-folder":
+        return "frame-folders"
+    return None
 
 
 @dataclass
@@ -346,7 +364,11 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
     path = Path(path)
     present = None
     if path.is_dir():
-        decoded, fps, count, views, size, present = _view_videos(path, opts, count_frames)
+        lazy = _lazy_folder_kind(path)
+        if lazy is None:
+            raise LFFormatError(f"{path}: not an LF video folder (one video per view, or one sub-folder per frame)")
+        read_folder = _view_videos if lazy == "view-videos" else _frame_folders
+        decoded, fps, count, views, size, present = read_folder(path, opts, count_frames)
     elif not path.is_file():
         raise LFFileError(f"{path}: no such file")
     elif path.suffix.lower() in _LAYERED_READERS:
@@ -411,8 +433,6 @@ def _view_videos(folder: Path, opts: ReadOptions, count_frames: bool):
         LFShapeError: views of different sizes or frame counts.
         LFFormatError: a video that ends before the others (where no count was known).
     """
-    if _classify_folder(folder) != "view-videos":
-        raise LFFormatError(f"{folder}: not a folder of view videos (R_C.mp4, ...) nor an LF video file")
     _, views, found = _scan_view_files(folder, VIDEO_EXTS)
     grid = opts.grid or found
     missing = [(r, c) for r in range(grid[0]) for c in range(grid[1]) if (r, c) not in views]
@@ -454,6 +474,34 @@ def _view_videos(folder: Path, opts: ReadOptions, count_frames: bool):
                 reader.close()
 
     return frames(), first.fps, (counts[0] if all(counts) else None), tuple(grid), (h, w), present
+
+
+def _frame_folders(folder: Path, opts: ReadOptions, count_frames: bool = False):
+    """:func:`open_video_lf` of a folder of one sub-folder of view images per frame
+    (``frame_000000/`` ...): one sub-folder read at a time, in name order;
+    the first is read up front for the views and their size, the count is the number of
+    sub-folders. Returns ``(frames, fps, count, views, size, present)`` (no frame rate).
+
+    Raises:
+        LFShapeError: a frame whose views, size or missing views differ from the first's.
+    """
+    entries = _frame_entries(folder)
+    inner = ReadOptions(angular=opts.angular, grid=opts.grid, allow_missing=opts.allow_missing)
+    first = load_lf(entries[0], inner)
+
+    def frames() -> Iterator[np.ndarray]:
+        for k, entry in enumerate(entries[: opts.max_frames]):
+            loaded = first if k == 0 else load_lf(entry, inner)
+            same_mask = (loaded.present is None and first.present is None) or (
+                loaded.present is not None and first.present is not None
+                and np.array_equal(loaded.present, first.present))
+            if loaded.lf.shape != first.lf.shape or not same_mask:
+                raise LFShapeError(f"{entry}: a frame of {loaded.lf.shape} (views present: "
+                                   f"{'all' if loaded.present is None else int(loaded.present.sum())}) unlike "
+                                   f"{entries[0].name}'s {first.lf.shape}")
+            yield np.ascontiguousarray(loaded.lf)
+
+    return frames(), None, len(entries), first.lf.shape[:2], first.lf.shape[2:4], first.present
 
 
 def _next_view(reader: Iterator[np.ndarray], lf: np.ndarray, k: tuple[int, int], path: Path) -> bool:
@@ -567,8 +615,12 @@ def _load_folder(folder: Path, opts: ReadOptions) -> LoadedLF:
         video = open_video_lf(folder, dataclasses.replace(opts, crop=None, flip_u=False, flip_v=False))
         return LoadedLF(lf=collect_frames(video.frames, video.count, folder), format="view-videos", path=folder,
                         present=video.present, fps=video.fps)
+    if _lazy_folder_kind(folder) == "frame-folders":  # the lazy reader's frames, collected
+        video = open_video_lf(folder, dataclasses.replace(opts, crop=None, flip_u=False, flip_v=False))
+        return LoadedLF(lf=collect_frames(video.frames, video.count, folder), format="frames-folder", path=folder,
+                        present=video.present, fps=video.fps)
     # frames-folder: every entry one frame (or a clip), concatenated along T in name order.
-    entries = sorted(p for p in folder.iterdir() if not p.name.startswith("."))
+    entries = _frame_entries(folder)
     parts: list[np.ndarray] = []
     disps: list[np.ndarray] = []
     fps = None

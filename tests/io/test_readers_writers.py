@@ -346,3 +346,44 @@ def test_a_folder_of_view_videos_is_read_frame_by_frame(tmp_path, rng, monkeypat
     short = _view_video_folder(tmp_path / "short", video, frames={(2, 0): 3})
     with pytest.raises((LFShapeError, LFFormatError), match="2_0"):
         list(open_video_lf(short, count_frames=True).frames)
+
+
+def test_a_folder_of_frame_folders_is_read_frame_by_frame(tmp_path, rng, monkeypatch):
+    """A video written as one sub-folder of view images per frame (write_lf, lfstream decode
+    -o FOLDER) reads lazily: one frame folder at a time, the count from the sub-folders; the
+    same light fields as read whole; a frame unlike the first (size, or views missing) is
+    refused naming its folder; a folder whose sub-folders are not frames reads as before."""
+    import shutil
+    from pathlib import Path
+
+    import lfstream.io.readers as readers
+    from lfstream.io import ReadOptions, open_video_lf, reads_lazily
+
+    video = random_lf(rng, (4, 2, 3, 6, 8, 3))
+    folder = tmp_path / "frames"
+    write_lf(folder, video)
+    assert reads_lazily(folder)
+    reads = []
+    real = readers.load_lf
+
+    def spy(path, *a, **k):
+        reads.append(Path(path).name)
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(readers, "load_lf", spy)
+    lazy = open_video_lf(folder, ReadOptions(flip_v=True))
+    assert (lazy.count, lazy.views, lazy.size, reads) == (4, (2, 3), (6, 8), ["frame_000000"])
+    got = []
+    for k, frame in enumerate(lazy.frames):
+        assert len(reads) == max(1, k + 1)  # one frame folder read at a time
+        got.append(frame)
+    np.testing.assert_array_equal(np.stack(got), video[:, :, ::-1])
+    monkeypatch.setattr(readers, "load_lf", real)
+    np.testing.assert_array_equal(read_lf(folder), video)
+    (folder / "frame_000002" / "1_2.png").unlink()
+    with pytest.raises(LFMissingViewsError, match="frame_000002"):
+        list(open_video_lf(folder).frames)
+    with pytest.raises(LFShapeError, match="frame_000002"):  # with its mask: unlike the first frame's
+        list(open_video_lf(folder, ReadOptions(allow_missing=True)).frames)
+    shutil.copytree(folder, tmp_path / "nested" / "clip")  # a folder holding a video folder: read whole
+    assert not reads_lazily(tmp_path / "nested")
