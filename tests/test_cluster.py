@@ -142,3 +142,53 @@ def test_without_ray_the_engine_says_how_to_install_it(monkeypatch, tmp_path):
     monkeypatch.setattr(builtins, "__import__", no_ray)
     with pytest.raises(lfstream.LFValueError, match=r"pip install 'lfstream\[ray\]'"):
         batch([tmp_path / "x.npy"], tmp_path / "out", engine="ray")
+
+
+def test_frame_groups_stack_frames_as_they_come():
+    from lfstream.cluster.jobs import frame_groups
+
+    frames = (np.full((1, 1, 2, 2, 3), k, np.uint8) for k in range(7))
+    groups = list(frame_groups(frames, 3))
+    assert [start for start, _ in groups] == [0, 3, 6] and [len(g) for _, g in groups] == [3, 3, 1]
+    assert [int(g[0, 0, 0, 0, 0, 0]) for _, g in groups] == [0, 3, 6]
+
+
+def test_batch_reads_an_lf_video_a_group_at_a_time_and_a_damaged_one_fails_alone(tmp_path, monkeypatch):
+    """An LF video input is read as its groups are encoded (the first group is encoded
+    before the last frames are read: the video is never all in memory), the stream equals a
+    sequential encode with one group, and an input damaged part way fails alone: its groups
+    dropped, no file for it, the others written."""
+    import lfstream.cluster.run as run_mod
+
+    clip = synth_clip(6, 3, (40, 48), seed=3, motion=0.5).lf
+    lfstream.write_lf(tmp_path / "clip.avi", clip)
+    data = (tmp_path / "clip.avi").read_bytes()
+    (tmp_path / "cut.avi").write_bytes(data[: int(len(data) * 0.7)])
+    events = []
+    real_frames, real_encode = run_mod._input_frames, run_mod.encode_group
+
+    def frames_spy(path, read):
+        frames, present, fps = real_frames(path, read)
+
+        def counted():
+            for k, f in enumerate(frames):
+                events.append(("read", k))
+                yield f
+        return counted(), present, fps
+
+    def encode_spy(frames, start, *args):
+        events.append(("encode", start))
+        return real_encode(frames, start, *args)
+
+    monkeypatch.setattr(run_mod, "_input_frames", frames_spy)
+    monkeypatch.setattr(run_mod, "encode_group", encode_spy)
+    report = batch([tmp_path / "clip.avi"], tmp_path / "grouped", group_frames=2)
+    assert report.ok and report.frames == 6
+    assert events.index(("encode", 0)) < events.index(("read", 5))
+    whole = batch([tmp_path / "clip.avi"], tmp_path / "whole", group_frames=100)
+    assert open(whole.files[0].output, "rb").read() == lfstream.encode(clip)
+    mixed = batch([tmp_path / "cut.avi", tmp_path / "clip.avi"], tmp_path / "mixed", group_frames=2)
+    status = {f.input: f for f in mixed.files}
+    assert status[str(tmp_path / "cut.avi")].status == "failed" and "cut.avi" in status[str(tmp_path / "cut.avi")].error
+    assert status[str(tmp_path / "clip.avi")].status == "ok"
+    assert sorted(p.name for p in (tmp_path / "mixed").iterdir()) == ["clip.lfs"]

@@ -11,6 +11,7 @@ decoder would.
 from __future__ import annotations
 
 import io
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -131,9 +132,17 @@ def decode_group(header_bytes: bytes, packets: list[bytes], start: int, options:
     return GroupResult(start, frames=frames, seconds=time.perf_counter() - t0)
 
 
-def encode_groups(n_frames: int, group: int) -> list[tuple[int, int]]:
-    """``[start, stop)`` frame ranges of ``group`` frames (the last may be shorter)."""
-    return [(s, min(s + group, n_frames)) for s in range(0, n_frames, group)]
+def frame_groups(frames: Iterable[np.ndarray], group: int) -> Iterator[tuple[int, np.ndarray]]:
+    """The frames in groups of ``group`` (the last may be shorter), each stacked into one
+    array with the index of its first frame, as the frames come (one group in memory)."""
+    start, pending = 0, []
+    for frame in frames:
+        pending.append(frame)
+        if len(pending) == group:
+            yield start, np.stack(pending)
+            start, pending = start + group, []
+    if pending:
+        yield start, np.stack(pending)
 
 
 def decode_groups(packets: list[Packet], group: int) -> list[tuple[int, int]]:
@@ -166,5 +175,5 @@ def split_stream_bytes(data: bytes) -> tuple[StreamHeader, bytes, list[Packet], 
     return header, header_bytes, packets, raw
 
 
-__all__ = ["EncodeOptions", "DecodeOptions", "GroupResult", "encode_group", "decode_group", "encode_groups",
+__all__ = ["EncodeOptions", "DecodeOptions", "GroupResult", "encode_group", "decode_group", "frame_groups",
            "decode_groups", "split_stream_bytes"]

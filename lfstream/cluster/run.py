@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -26,15 +27,18 @@ from lfstream.cluster.jobs import (
     decode_group,
     decode_groups,
     encode_group,
-    encode_groups,
+    frame_groups,
     split_stream_bytes,
 )
-from lfstream.errors import LFStreamError, LFValueError
+from lfstream.errors import LFFormatError, LFStreamError, LFValueError
 
 ENGINES = ("local", "ray")
 MODES = ("encode", "decode")
 #: Attempts Ray gives a job whose worker died (the first run plus retries).
 RAY_MAX_RETRIES = 3
+#: Jobs in flight per Ray worker: enough to keep every worker busy while the driver reads
+#: the next groups, few enough that the frames waiting in the object store stay bounded.
+RAY_JOBS_PER_WORKER = 2
 
 
 @dataclass
@@ -95,14 +99,39 @@ def _output_name(path: Path, suffix: str, taken: set[str]) -> str:
     return name
 
 
-def _run_local(jobs: list[_Job]) -> list[GroupResult | BaseException]:
-    out: list[GroupResult | BaseException] = []
-    for job in jobs:
+def _run_local(jobs: Iterable[_Job]) -> list[tuple[int, GroupResult | BaseException]]:
+    """Runs the jobs one by one as they come (a job's frames are read just before it runs);
+    returns each job's input and result, in order."""
+    out: list[tuple[int, GroupResult | BaseException]] = []
+    source = iter(jobs)
+    while (job := next(source, None)) is not None:
         try:
-            out.append(job.fn(*job.args))
+            result = job.fn(*job.args)
         except Exception as exc:  # noqa: BLE001 - the input fails alone, with its error in the report
-            out.append(exc)
+            result = exc
+        out.append((job.file, result))
+        job = None  # its frames go before the next group is read (a for loop kept them meanwhile)
     return out
+
+
+def _prepend(box: list, rest: Iterator) -> Iterator:
+    """``box``'s one item, then ``rest``: the item handed over, not held (``itertools.chain``
+    keeps its first iterable, and so a group of frames, for as long as it runs)."""
+    yield box.pop()
+    yield from rest
+
+
+def _input_frames(path: Path, read) -> tuple[Iterator[np.ndarray], np.ndarray | None, float | None]:
+    """An input's frames, its views' mask and frame rate: an LF video frame by frame
+    (:func:`lfstream.io.open_video_lf`), anything else read whole."""
+    from lfstream.io import load_lf, open_video_lf, reads_lazily
+
+    if reads_lazily(path):
+        video = open_video_lf(path, read)
+        return video.frames, video.present, video.fps
+    loaded = load_lf(path, read)
+    lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
+    return iter(lf), loaded.present, loaded.fps
 
 
 def _remote_call(fn: Callable[..., GroupResult], args: tuple, fail_once: str | None) -> GroupResult:
@@ -121,8 +150,12 @@ def _ray():
     return ray
 
 
-def _run_ray(jobs: list[_Job], address: str | None, workers: int | None,
-             fail_once: Path | None) -> tuple[list[GroupResult | BaseException], int]:
+def _run_ray(jobs: Iterable[_Job], address: str | None, workers: int | None,
+             fail_once: Path | None) -> tuple[list[tuple[int, GroupResult | BaseException]], int]:
+    """Runs the jobs as Ray tasks, at most :data:`RAY_JOBS_PER_WORKER` per worker in flight
+    (a job's frames are read and put into Ray's object store when it is submitted, so a
+    long video is never all in memory at once); returns each job's input and result, in
+    order, and the cluster's CPUs."""
     ray = _ray()
     started = not ray.is_initialized()
     if started:
@@ -135,14 +168,23 @@ def _run_ray(jobs: list[_Job], address: str | None, workers: int | None,
     try:
         n_workers = int(ray.cluster_resources().get("CPU", 1))
         remote = ray.remote(max_retries=RAY_MAX_RETRIES, retry_exceptions=False)(_remote_call)
-        refs = [remote.remote(job.fn, job.args, str(fail_once) if fail_once and k == 0 else None)
-                for k, job in enumerate(jobs)]
-        out: list[GroupResult | BaseException] = []
-        for ref in refs:
+        out: list[tuple[int, GroupResult | BaseException]] = []
+        in_flight: deque = deque()
+
+        def collect_oldest() -> None:
+            file, ref = in_flight.popleft()
             try:
-                out.append(ray.get(ref))
+                out.append((file, ray.get(ref)))
             except Exception as exc:  # noqa: BLE001 - RayTaskError wraps the job's own error
-                out.append(getattr(exc, "cause", None) or exc)
+                out.append((file, getattr(exc, "cause", None) or exc))
+
+        for k, job in enumerate(jobs):
+            if len(in_flight) >= RAY_JOBS_PER_WORKER * n_workers:
+                collect_oldest()
+            in_flight.append((job.file, remote.remote(job.fn, job.args, str(fail_once) if fail_once and k == 0
+                                                       else None)))
+        while in_flight:
+            collect_oldest()
         return out, n_workers
     finally:
         if started:
@@ -170,7 +212,7 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
     Returns:
         :class:`BatchReport`; an input that failed has ``status="failed"`` and its error.
     """
-    from lfstream.io import ReadOptions, load_lf, write_lf
+    from lfstream.io import ReadOptions, write_lf
     from lfstream.io._fs import atomic_open, prepare_output_dir, remove_if_made_empty
 
     if mode not in MODES or engine not in ENGINES:
@@ -185,51 +227,69 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
     out_dir = prepare_output_dir(output, overwrite=True)
     read = read or ReadOptions()
     report = BatchReport(engine=engine, workers=1, mode=mode)
-    jobs: list[_Job] = []
     plans: dict[int, dict] = {}
     taken: set[str] = set()
-    for i, src in enumerate(inputs):
-        path = Path(src)
-        res = FileResult(input=str(path))
-        report.files.append(res)
+
+    def encode_jobs(i: int, path: Path, target: Path) -> Iterator[_Job]:
+        # an LF video is read a group of frames at a time, as its jobs are run or submitted:
+        # a long video (or a collection of them) is never all in memory (before: every
+        # input read whole, and every group copied, before the first job ran)
+        frames, present, fps = _input_frames(path, read)
+        first = next(frames, None)
+        if first is None:
+            raise LFFormatError(f"{path}: contains no frames")
+        # the default's choice (preset, or the views) once per input, on its first frame
+        options = encode.for_input(np.ascontiguousarray(first), present)
+        plans[i] = {"target": target, "views": tuple(first.shape[:2]), "size": tuple(first.shape[2:4]),
+                    "fps": fps or 30.0, "options": options}
+        first = [first]  # handed over to the groups, not kept here
+        for start, group in frame_groups(_prepend(first, frames), group_frames):
+            yield _Job(i, encode_group, (group, start, plans[i]["fps"], options, present))
+            del group  # not held while the next group is read
+
+    def decode_jobs(i: int, path: Path, target: Path) -> Iterator[_Job]:
         try:
-            name = _output_name(path, ".lfs" if mode == "encode" else output_format, taken)
-            target = out_dir / name
-            if target.exists() and not overwrite:
-                raise LFValueError(f"{target}: already exists (pass overwrite=True / --overwrite to replace it)")
-            res.output = str(target)
-            if mode == "encode":
-                loaded = load_lf(path, read)
-                lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
-                fps = loaded.fps or 30.0
-                # the default's choice (preset, or the views) once per input, on its first frame
-                options = encode.for_input(np.ascontiguousarray(lf[0]), loaded.present)
-                plans[i] = {"target": target, "views": tuple(lf.shape[1:3]), "size": tuple(lf.shape[3:5]), "fps": fps,
-                            "options": options}
-                for a, b in encode_groups(len(lf), group_frames):
-                    jobs.append(_Job(i, encode_group, (np.ascontiguousarray(lf[a:b]), a, fps, options, loaded.present)))
-            else:
-                try:
-                    data = path.read_bytes()
-                except OSError as exc:
-                    raise LFStreamError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-                header, header_bytes, packets, raw = split_stream_bytes(data)
-                if not packets:
-                    raise LFValueError(f"{path}: stream holds no frames")
-                plans[i] = {"target": target, "fps": header.fps}
-                for a, b in decode_groups(packets, group_frames):
-                    jobs.append(_Job(i, decode_group, (header_bytes, raw[a:b], a, decode)))
-        except LFStreamError as exc:
-            res.status, res.error = "failed", f"{path}: {exc}" if str(path) not in str(exc) else str(exc)
-    if engine == "ray" and jobs:
-        results, report.workers = _run_ray(jobs, address, workers, _fail_once)
-    else:
-        results = _run_local(jobs)
+            data = path.read_bytes()
+        except OSError as exc:
+            raise LFStreamError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+        header, header_bytes, packets, raw = split_stream_bytes(data)
+        if not packets:
+            raise LFValueError(f"{path}: stream holds no frames")
+        plans[i] = {"target": target, "fps": header.fps}
+        for a, b in decode_groups(packets, group_frames):
+            yield _Job(i, decode_group, (header_bytes, raw[a:b], a, decode))
+
+    def all_jobs() -> Iterator[_Job]:
+        for i, src in enumerate(inputs):
+            path = Path(src)
+            res = FileResult(input=str(path))
+            report.files.append(res)
+            try:
+                name = _output_name(path, ".lfs" if mode == "encode" else output_format, taken)
+                target = out_dir / name
+                if target.exists() and not overwrite:
+                    raise LFValueError(f"{target}: already exists (pass overwrite=True / --overwrite to replace it)")
+                res.output = str(target)
+                yield from (encode_jobs if mode == "encode" else decode_jobs)(i, path, target)
+            except LFStreamError as exc:  # the input fails alone (also part way: its groups are dropped)
+                res.status, res.error = "failed", f"{path}: {exc}" if str(path) not in str(exc) else str(exc)
+
+    jobs = all_jobs()
+    results: list[tuple[int, GroupResult | BaseException]] = []
+    first_job = [next(jobs, None)]
+    if first_job[0] is not None:  # (no Ray cluster started for inputs that all failed)
+        jobs = _prepend(first_job, jobs)
+        if engine == "ray":
+            results, report.workers = _run_ray(jobs, address, workers, _fail_once)
+        else:
+            results = _run_local(jobs)
     by_file: dict[int, list[GroupResult | BaseException]] = {}
-    for job, r in zip(jobs, results):
-        by_file.setdefault(job.file, []).append(r)
+    for file, r in results:
+        by_file.setdefault(file, []).append(r)
     for i, parts in by_file.items():
         res, plan = report.files[i], plans[i]
+        if res.status == "failed":  # its reading failed part way
+            continue
         failed = next((p for p in parts if isinstance(p, BaseException)), None)
         if failed is not None:
             res.status, res.error = "failed", f"{res.input}: {failed}"
