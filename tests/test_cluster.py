@@ -192,3 +192,47 @@ def test_batch_reads_an_lf_video_a_group_at_a_time_and_a_damaged_one_fails_alone
     assert status[str(tmp_path / "cut.avi")].status == "failed" and "cut.avi" in status[str(tmp_path / "cut.avi")].error
     assert status[str(tmp_path / "clip.avi")].status == "ok"
     assert sorted(p.name for p in (tmp_path / "mixed").iterdir()) == ["clip.lfs"]
+
+
+def test_batch_decode_writes_each_group_as_it_comes_and_drops_a_failed_output(videos, tmp_path, monkeypatch):
+    """Decoding, every group's frames go into the output as their job finishes (the first
+    group written before the last is decoded: a decoded video is never all in memory), in
+    every format the same frames as lfstream.decode; a job that fails part way leaves no
+    output for its input (no partial file), the others complete."""
+    import lfstream.cluster.run as run_mod
+    from lfstream.io import FrameWriter
+
+    paths, _ = videos
+    enc = batch([paths[0]], tmp_path / "lfs", group_frames=2)
+    lfs = enc.files[0].output
+    want = lfstream.decode(open(lfs, "rb").read())
+    events = []
+    real_decode, real_write = run_mod.decode_group, FrameWriter.write
+
+    def decode_spy(header, packets, start, options):
+        events.append(("decode", start))
+        return real_decode(header, packets, start, options)
+
+    def write_spy(self, lf):
+        events.append(("write", self.frames))
+        return real_write(self, lf)
+
+    monkeypatch.setattr(run_mod, "decode_group", decode_spy)
+    monkeypatch.setattr(FrameWriter, "write", write_spy)
+    for fmt in (".avi", ".npy", ".npz", ""):
+        events.clear()
+        rep = batch([lfs], tmp_path / f"dec{fmt or 'dir'}", mode="decode", group_frames=2, output_format=fmt)
+        assert rep.ok and rep.files[0].frames == 7
+        np.testing.assert_array_equal(lfstream.read_lf(rep.files[0].output), want)
+        if fmt != ".npz":
+            assert events.index(("write", 0)) < events.index(("decode", 6))
+
+    def failing(header, packets, start, options):
+        if start >= 4:
+            raise LFValueError("a decode that fails part way")
+        return real_decode(header, packets, start, options)
+
+    monkeypatch.setattr(run_mod, "decode_group", failing)
+    rep = batch([lfs, lfs], tmp_path / "failed", mode="decode", group_frames=2, output_format=".avi")
+    assert [f.status for f in rep.files] == ["failed", "failed"] and "part way" in rep.files[0].error
+    assert not (tmp_path / "failed").exists()  # nothing written, the folder it made removed

@@ -99,19 +99,108 @@ def _output_name(path: Path, suffix: str, taken: set[str]) -> str:
     return name
 
 
-def _run_local(jobs: Iterable[_Job]) -> list[tuple[int, GroupResult | BaseException]]:
-    """Runs the jobs one by one as they come (a job's frames are read just before it runs);
-    returns each job's input and result, in order."""
-    out: list[tuple[int, GroupResult | BaseException]] = []
+def _run_local(jobs: Iterable[_Job], on_result: Callable[[int, GroupResult | BaseException], None]) -> None:
+    """Runs the jobs one by one as they come (a job's frames are read just before it runs),
+    handing each job's input and result to ``on_result`` in order."""
     source = iter(jobs)
     while (job := next(source, None)) is not None:
         try:
             result = job.fn(*job.args)
         except Exception as exc:  # noqa: BLE001 - the input fails alone, with its error in the report
             result = exc
-        out.append((job.file, result))
-        job = None  # its frames go before the next group is read (a for loop kept them meanwhile)
-    return out
+        file, job = job.file, None  # its frames go before the next group is read
+        on_result(file, result)
+        result = None
+
+
+class _Outputs:
+    """Each input's results, in job order (all of an input's jobs come together), into its
+    output: an encode's packets (small) written with the header when its last group is in;
+    a decode's frames written group by group as they come (:class:`lfstream.io.FrameWriter`;
+    a ``.npz`` whole, its members compressed whole), so a decoded video is never all in
+    memory. An input whose reading or a job failed leaves no output."""
+
+    def __init__(self, mode: str, files: list[FileResult], plans: dict[int, dict], overwrite: bool) -> None:
+        self.mode, self.files, self.plans, self.overwrite = mode, files, plans, overwrite
+        self._reset(None)
+
+    def _reset(self, file: int | None) -> None:
+        self.file, self.parts, self.writer, self.frames, self.nbytes, self.error = file, [], None, 0, 0, None
+
+    def add(self, file: int, result: GroupResult | BaseException) -> None:
+        if file != self.file:
+            self.finish()
+            self._reset(file)
+        if self.error is not None or self.files[file].status == "failed":
+            return
+        if isinstance(result, BaseException):
+            self.error = result
+            self.abort()
+            return
+        if self.mode == "encode":
+            self.parts.append(result.packets)
+            self.frames += len(result.packets)
+            return
+        plan = self.plans[file]
+        self.frames += len(result.frames)
+        self.nbytes += int(result.frames.nbytes)
+        if plan["target"].suffix.lower() == ".npz":
+            self.parts.append(result.frames)
+            return
+        try:
+            if self.writer is None:
+                from lfstream.io import FrameWriter
+
+                self.writer = FrameWriter(plan["target"], plan["count"], fps=plan["fps"], overwrite=self.overwrite)
+            for frame in result.frames:
+                self.writer.write(frame)
+        except LFStreamError as exc:
+            self.error = exc
+            self.abort()
+
+    def finish(self) -> None:
+        """Completes the current input's output (or drops it, where it failed)."""
+        if self.file is None:
+            return
+        res, plan = self.files[self.file], self.plans[self.file]
+        if res.status == "failed" or self.error is not None:  # its reading or a job failed
+            self.abort()
+            if self.error is not None:
+                res.status, res.error = "failed", f"{res.input}: {self.error}"
+            self.file = None
+            return
+        try:
+            if self.mode == "encode":
+                from lfstream.codec.bitstream import pack_header
+                from lfstream.io._fs import atomic_open
+
+                header = plan["options"].encoder().header(plan["views"], plan["size"], plan["fps"])
+                with atomic_open(plan["target"]) as fh:
+                    fh.write(pack_header(header))
+                    for packets in self.parts:
+                        for p in packets:
+                            fh.write(p)
+                res.bytes = plan["target"].stat().st_size
+            elif self.writer is not None:
+                self.writer.close()
+                res.bytes = plan["target"].stat().st_size if plan["target"].is_file() else self.nbytes
+            else:
+                from lfstream.io import write_lf
+
+                write_lf(plan["target"], np.concatenate(self.parts), fps=plan["fps"], overwrite=self.overwrite)
+                res.bytes = plan["target"].stat().st_size
+            res.frames, res.status = self.frames, "ok"
+        except LFStreamError as exc:
+            self.abort()
+            res.status, res.error = "failed", f"{res.input}: {exc}"
+        self.file = None
+
+    def abort(self) -> None:
+        """Discards the current input's partial output."""
+        if self.writer is not None:
+            self.writer.abort()
+            self.writer = None
+        self.parts = []
 
 
 def _prepend(box: list, rest: Iterator) -> Iterator:
@@ -150,12 +239,12 @@ def _ray():
     return ray
 
 
-def _run_ray(jobs: Iterable[_Job], address: str | None, workers: int | None,
-             fail_once: Path | None) -> tuple[list[tuple[int, GroupResult | BaseException]], int]:
+def _run_ray(jobs: Iterable[_Job], address: str | None, workers: int | None, fail_once: Path | None,
+             on_result: Callable[[int, GroupResult | BaseException], None]) -> int:
     """Runs the jobs as Ray tasks, at most :data:`RAY_JOBS_PER_WORKER` per worker in flight
     (a job's frames are read and put into Ray's object store when it is submitted, so a
-    long video is never all in memory at once); returns each job's input and result, in
-    order, and the cluster's CPUs."""
+    long video is never all in memory at once), handing each job's input and result to
+    ``on_result`` in job order; returns the cluster's CPUs."""
     ray = _ray()
     started = not ray.is_initialized()
     if started:
@@ -168,15 +257,15 @@ def _run_ray(jobs: Iterable[_Job], address: str | None, workers: int | None,
     try:
         n_workers = int(ray.cluster_resources().get("CPU", 1))
         remote = ray.remote(max_retries=RAY_MAX_RETRIES, retry_exceptions=False)(_remote_call)
-        out: list[tuple[int, GroupResult | BaseException]] = []
         in_flight: deque = deque()
 
         def collect_oldest() -> None:
             file, ref = in_flight.popleft()
             try:
-                out.append((file, ray.get(ref)))
+                result = ray.get(ref)
             except Exception as exc:  # noqa: BLE001 - RayTaskError wraps the job's own error
-                out.append((file, getattr(exc, "cause", None) or exc))
+                result = getattr(exc, "cause", None) or exc
+            on_result(file, result)
 
         for k, job in enumerate(jobs):
             if len(in_flight) >= RAY_JOBS_PER_WORKER * n_workers:
@@ -185,7 +274,7 @@ def _run_ray(jobs: Iterable[_Job], address: str | None, workers: int | None,
                                                        else None)))
         while in_flight:
             collect_oldest()
-        return out, n_workers
+        return n_workers
     finally:
         if started:
             ray.shutdown()
@@ -212,8 +301,8 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
     Returns:
         :class:`BatchReport`; an input that failed has ``status="failed"`` and its error.
     """
-    from lfstream.io import ReadOptions, write_lf
-    from lfstream.io._fs import atomic_open, prepare_output_dir, remove_if_made_empty
+    from lfstream.io import ReadOptions
+    from lfstream.io._fs import prepare_output_dir, remove_if_made_empty
 
     if mode not in MODES or engine not in ENGINES:
         raise LFValueError(f"mode: one of {', '.join(MODES)}; engine: one of {', '.join(ENGINES)}; "
@@ -255,7 +344,7 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
         header, header_bytes, packets, raw = split_stream_bytes(data)
         if not packets:
             raise LFValueError(f"{path}: stream holds no frames")
-        plans[i] = {"target": target, "fps": header.fps}
+        plans[i] = {"target": target, "fps": header.fps, "count": len(packets)}
         for a, b in decode_groups(packets, group_frames):
             yield _Job(i, decode_group, (header_bytes, raw[a:b], a, decode))
 
@@ -275,45 +364,19 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
                 res.status, res.error = "failed", f"{path}: {exc}" if str(path) not in str(exc) else str(exc)
 
     jobs = all_jobs()
-    results: list[tuple[int, GroupResult | BaseException]] = []
+    outputs = _Outputs(mode, report.files, plans, overwrite)
     first_job = [next(jobs, None)]
-    if first_job[0] is not None:  # (no Ray cluster started for inputs that all failed)
-        jobs = _prepend(first_job, jobs)
-        if engine == "ray":
-            results, report.workers = _run_ray(jobs, address, workers, _fail_once)
-        else:
-            results = _run_local(jobs)
-    by_file: dict[int, list[GroupResult | BaseException]] = {}
-    for file, r in results:
-        by_file.setdefault(file, []).append(r)
-    for i, parts in by_file.items():
-        res, plan = report.files[i], plans[i]
-        if res.status == "failed":  # its reading failed part way
-            continue
-        failed = next((p for p in parts if isinstance(p, BaseException)), None)
-        if failed is not None:
-            res.status, res.error = "failed", f"{res.input}: {failed}"
-            continue
-        try:
-            if mode == "encode":
-                from lfstream.codec.bitstream import pack_header
-
-                header = plan["options"].encoder().header(plan["views"], plan["size"], plan["fps"])
-                with atomic_open(plan["target"]) as fh:
-                    fh.write(pack_header(header))
-                    for part in parts:
-                        for p in part.packets:
-                            fh.write(p)
-                res.frames = sum(len(p.packets) for p in parts)
-                res.bytes = plan["target"].stat().st_size
+    try:
+        if first_job[0] is not None:  # (no Ray cluster started for inputs that all failed)
+            jobs = _prepend(first_job, jobs)
+            if engine == "ray":
+                report.workers = _run_ray(jobs, address, workers, _fail_once, outputs.add)
             else:
-                frames = np.concatenate([p.frames for p in parts])
-                write_lf(plan["target"], frames, fps=plan["fps"], overwrite=overwrite)
-                res.frames = len(frames)
-                res.bytes = plan["target"].stat().st_size if plan["target"].is_file() else int(frames.nbytes)
-            res.status = "ok"
-        except LFStreamError as exc:
-            res.status, res.error = "failed", f"{res.input}: {exc}"
+                _run_local(jobs, outputs.add)
+        outputs.finish()
+    except BaseException:
+        outputs.abort()
+        raise
     if not any(f.status == "ok" for f in report.files):  # every input failed
         remove_if_made_empty(out_dir, created)
     report.wall_s = time.perf_counter() - t0
