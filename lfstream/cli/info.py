@@ -42,17 +42,23 @@ def describe(loaded) -> dict:
         out["disparity_range"] = [float(d.min()), float(d.max())]
     if loaded.format == "lfs":
         out["stream"] = describe_stream(Path(loaded.path), loaded.frames)
-    elif loaded.format == "video" and Path(loaded.path).is_file():
+    elif loaded.format in ("video", "view-videos"):
         out["video"] = describe_video(Path(loaded.path))
     return out
 
 
 def describe_video(path: Path) -> dict:
-    """How a mosaic video file is coded (what decides how fast it reads)."""
-    from lfstream.io.video import video_info
+    """How a mosaic video file, or a folder of one video per view, is coded (what decides
+    how fast it reads): the (first view's) codec and pixel format, the bytes on disk and,
+    for a folder, how many video files."""
+    from lfstream.io.video import VIDEO_EXTS, video_info
 
-    coded = video_info(path)
-    return {"codec": coded.codec, "pixel_format": coded.pixel_format, "file_bytes": path.stat().st_size}
+    files = sorted(p for p in path.iterdir() if p.suffix.lower() in VIDEO_EXTS) if path.is_dir() else [path]
+    coded = video_info(files[0])
+    out = {"codec": coded.codec, "pixel_format": coded.pixel_format, "file_bytes": sum(p.stat().st_size for p in files)}
+    if path.is_dir():
+        out["files"] = len(files)
+    return out
 
 
 def describe_stream(path: Path, frames: int) -> dict:
@@ -111,7 +117,8 @@ def _text(info: dict) -> str:
         lines.append(f"  disparity ground truth, {lo:.3f} .. {hi:.3f} px/view")
     c = info.get("video")
     if c:
-        lines.append(f"  coded   {c['codec']} ({c['pixel_format']}), {c['file_bytes'] / 1e6:.1f} MB on disk")
+        lines.append(f"  coded   {c['codec']} ({c['pixel_format']}), {c['file_bytes'] / 1e6:.1f} MB on disk"
+                     + (f" in {c['files']} files" if c.get("files") else ""))
     s = info.get("stream")
     if s:
         layers = coding_layers(s["depth_hint"], s["residual"], s["residual_mode"], s.get("hint_scale"))
@@ -153,6 +160,6 @@ def _describe_input(args: argparse.Namespace) -> dict:
            "has_weight": False, "has_disparity": False}
     if fmt == "lfs":
         out["stream"] = describe_stream(args.input, frames)
-    elif fmt == "video":
+    elif fmt in ("video", "view-videos"):
         out["video"] = describe_video(args.input)
     return out

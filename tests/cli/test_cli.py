@@ -799,6 +799,8 @@ def test_a_folder_of_view_videos_streams_and_is_described_without_decoding(capsy
     code, out, _ = run(capsys, "info", folder, "--allow-missing", "--json")
     info = json.loads(out)
     assert code == 0 and info["format"] == "view-videos" and info["frames"] == 3 and info["missing_views"] == [[0, 1]]
+    assert info["video"]["codec"] == "h264" and info["video"]["files"] == 8
+    assert info["video"]["file_bytes"] == sum(p.stat().st_size for p in folder.iterdir())
     monkeypatch.setattr(readers, "iter_video_frames", real)
     code, out, _ = run(capsys, "stream", folder, "--allow-missing", "-o", tmp_path / "s", "--json")
     assert code == 0 and json.loads(out)["frames"] == 3
