@@ -315,15 +315,30 @@ def _frame_entries(folder: Path) -> list[Path]:
 
 def _lazy_folder_kind(folder: Path) -> str | None:
     """``"view-videos"`` (one video per view) or ``"frame-folders"`` (one sub-folder of view
-    images per frame, as :func:`lfstream.io.write_lf` and ``lfstream decode`` write a video),
-    which :func:`open_video_lf` reads frame by frame; ``None`` for other folders (read whole)."""
+    images per frame, as :func:`lfstream.io.write_lf` and ``lfstream decode`` write a video,
+    or one single-frame ``.npy`` per frame), which :func:`open_video_lf` reads frame by frame;
+    ``None`` for other folders (read whole)."""
     kind = _classify_folder(folder)
     if kind == "view-videos":
         return kind
     entries = _frame_entries(folder) if kind == "frames-folder" else []
     if entries and all(p.is_dir() for p in entries) and _classify_folder(entries[0]) == "sai-folder":
         return "frame-folders"
+    if entries and all(p.is_file() and p.suffix.lower() == ".npy" for p in entries) and _one_frame_npy(entries[0]):
+        return "frame-folders"  # one light field a .npy file: read the same way, a file at a time
     return None
+
+
+def _one_frame_npy(path: Path) -> bool:
+    """Whether a ``.npy`` holds one light field ``(U, V, H, W, C)`` (its header read only)."""
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                           else np.lib.format.read_array_header_2_0)
+            return len(read_header(fh)[0]) == 5
+    except (OSError, ValueError):
+        return False
 
 
 @dataclass
@@ -485,8 +500,8 @@ def _view_videos(folder: Path, opts: ReadOptions, count_frames: bool):
 
 
 def _frame_folders(folder: Path, opts: ReadOptions, count_frames: bool = False):
-    """:func:`open_video_lf` of a folder of one sub-folder of view images per frame
-    (``frame_000000/`` ...): one sub-folder read at a time, in name order;
+    """:func:`open_video_lf` of a folder of one sub-folder of view images (or one ``.npy``)
+    per frame (``frame_000000/`` ...): one entry read at a time, in name order;
     the first is read up front for the views and their size, the count is the number of
     sub-folders. Returns ``(frames, fps, count, views, size, present)`` (no frame rate).
 

@@ -387,3 +387,24 @@ def test_a_folder_of_frame_folders_is_read_frame_by_frame(tmp_path, rng, monkeyp
         list(open_video_lf(folder, ReadOptions(allow_missing=True)).frames)
     shutil.copytree(folder, tmp_path / "nested" / "clip")  # a folder holding a video folder: read whole
     assert not reads_lazily(tmp_path / "nested")
+
+
+def test_a_folder_of_single_frame_npy_files_is_an_lf_video(tmp_path, rng):
+    """One .npy a frame reads lazily like frame folders (the same frames as read whole); a
+    folder whose .npy files hold clips is read whole as before."""
+    from lfstream.io import open_video_lf, reads_lazily
+
+    video = random_lf(rng, (3, 2, 2, 6, 8, 3))
+    (tmp_path / "frames").mkdir()
+    for t, frame in enumerate(video):
+        np.save(tmp_path / "frames" / f"f{t:03d}.npy", frame)
+    assert reads_lazily(tmp_path / "frames")
+    lazy = open_video_lf(tmp_path / "frames")
+    assert lazy.count == 3
+    np.testing.assert_array_equal(np.stack(list(lazy.frames)), video)
+    np.testing.assert_array_equal(read_lf(tmp_path / "frames"), video)
+    (tmp_path / "clips").mkdir()
+    np.save(tmp_path / "clips" / "a.npy", video[:2])
+    np.save(tmp_path / "clips" / "b.npy", video[2:])
+    assert not reads_lazily(tmp_path / "clips")
+    np.testing.assert_array_equal(read_lf(tmp_path / "clips"), video)
