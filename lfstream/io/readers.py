@@ -218,13 +218,19 @@ def _read_rgb_view(p: Path) -> np.ndarray:
 _ARRAY_MAGIC = {".npy": (b"\x93NUMPY", "a NumPy .npy file"), ".npz": (b"PK", "a NumPy .npz (zip) archive")}
 
 
+def _npy_header(fh) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype a ``.npy`` header declares (``fh`` at its magic; left after it)."""
+    version = np.lib.format.read_magic(fh)
+    read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+    shape, _, dtype = read_header(fh)
+    return shape, dtype
+
+
 def _check_declared_size(fh, available: int, name: str) -> None:
     """Refuses an array whose header declares more data than its file holds (a truncated or
     forged ``.npy``: numpy would first try to allocate what the header says, up to
     petabytes). ``fh`` is at the array's magic; ``available``: its bytes, header included."""
-    version = np.lib.format.read_magic(fh)
-    read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-    shape, _, dtype = read_header(fh)
+    shape, dtype = _npy_header(fh)
     declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
     if declared > available - fh.tell():
         raise LFFormatError(f"{name}: its header declares a {'x'.join(map(str, shape))} {dtype} array ({declared} "
@@ -333,10 +339,7 @@ def _one_frame_npy(path: Path) -> bool:
     """Whether a ``.npy`` holds one light field ``(U, V, H, W, C)`` (its header read only)."""
     try:
         with open(path, "rb") as fh:
-            version = np.lib.format.read_magic(fh)
-            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                           else np.lib.format.read_array_header_2_0)
-            return len(read_header(fh)[0]) == 5
+            return len(_npy_header(fh)[0]) == 5
     except (OSError, ValueError):
         return False
 
