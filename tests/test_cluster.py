@@ -158,29 +158,32 @@ def test_batch_reads_an_lf_video_a_group_at_a_time_and_a_damaged_one_fails_alone
     before the last frames are read: the video is never all in memory), the stream equals a
     sequential encode with one group, and an input damaged part way fails alone: its groups
     dropped, no file for it, the others written."""
+    import dataclasses
+
     import lfstream.cluster.run as run_mod
+    import lfstream.io as io_pkg
 
     clip = synth_clip(6, 3, (40, 48), seed=3, motion=0.5).lf
     lfstream.write_lf(tmp_path / "clip.avi", clip)
     data = (tmp_path / "clip.avi").read_bytes()
     (tmp_path / "cut.avi").write_bytes(data[: int(len(data) * 0.7)])
     events = []
-    real_frames, real_encode = run_mod._input_frames, run_mod.encode_group
+    real_frames, real_encode = io_pkg.open_lf_frames, run_mod.encode_group
 
     def frames_spy(path, read):
-        frames, present, fps = real_frames(path, read)
+        video = real_frames(path, read)
 
         def counted():
-            for k, f in enumerate(frames):
+            for k, f in enumerate(video.frames):
                 events.append(("read", k))
                 yield f
-        return counted(), present, fps
+        return dataclasses.replace(video, frames=counted())
 
     def encode_spy(frames, start, *args):
         events.append(("encode", start))
         return real_encode(frames, start, *args)
 
-    monkeypatch.setattr(run_mod, "_input_frames", frames_spy)
+    monkeypatch.setattr(io_pkg, "open_lf_frames", frames_spy)
     monkeypatch.setattr(run_mod, "encode_group", encode_spy)
     report = batch([tmp_path / "clip.avi"], tmp_path / "grouped", group_frames=2)
     assert report.ok and report.frames == 6

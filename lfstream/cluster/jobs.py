@@ -40,7 +40,7 @@ class EncodeOptions:
     hance_map: bool = False
 
     def __post_init__(self) -> None:
-        from lfstream.codec.encoder import PRESETS, preset_coding
+        from lfstream.codec.encoder import PRESETS
         from lfstream.codec.residual import check_residual_mode, check_residual_quality
 
         if self.preset is not None and self.preset not in PRESETS:
@@ -48,10 +48,11 @@ class EncodeOptions:
         if self.residual is not None:
             check_residual_quality(self.residual)
         check_residual_mode(self.residual_mode)
-        if self.hance_map and (self.residual is not None or (self.preset is not None
-                                                              and preset_coding(self.preset).codec != "jpeg")):
-            raise LFValueError("hance_map: a JPEG-Hance strength map goes with a JPEG centre view (preset fast) "
-                               "and no residual layer")
+        if self.hance_map:  # the encoder's own refusal of a coding the maps do not go with
+            from lfstream.codec.encoder import DEFAULT_PRESET, Encoder
+
+            Encoder(preset=self.preset or DEFAULT_PRESET, residual=self.residual, residual_mode=self.residual_mode,
+                    hance_map=True)
 
     def for_input(self, first: np.ndarray, present: np.ndarray | None = None) -> EncodeOptions:
         """These options with the preset (and, where the default codes the views, the residual)

@@ -210,19 +210,6 @@ def _prepend(box: list, rest: Iterator) -> Iterator:
     yield from rest
 
 
-def _input_frames(path: Path, read) -> tuple[Iterator[np.ndarray], np.ndarray | None, float | None]:
-    """An input's frames, its views' mask and frame rate: an LF video frame by frame
-    (:func:`lfstream.io.open_video_lf`), anything else read whole."""
-    from lfstream.io import load_lf, open_video_lf, reads_lazily
-
-    if reads_lazily(path):
-        video = open_video_lf(path, read)
-        return video.frames, video.present, video.fps
-    loaded = load_lf(path, read)
-    lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
-    return iter(lf), loaded.present, loaded.fps
-
-
 def _remote_call(fn: Callable[..., GroupResult], args: tuple, fail_once: str | None) -> GroupResult:
     if fail_once is not None and not os.path.exists(fail_once):
         # fault injection for tests: the first attempt of this job kills its worker process
@@ -323,7 +310,10 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
         # an LF video is read a group of frames at a time, as its jobs are run or submitted:
         # a long video (or a collection of them) is never all in memory (before: every
         # input read whole, and every group copied, before the first job ran)
-        frames, present, fps = _input_frames(path, read)
+        from lfstream.io import open_lf_frames
+
+        video = open_lf_frames(path, read)
+        frames, present, fps = video.frames, video.present, video.fps
         first = next(frames, None)
         if first is None:
             raise LFFormatError(f"{path}: contains no frames")

@@ -12,7 +12,17 @@
 
 from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image, write_image
 from lfstream.io.pfm import read_pfm, write_pfm
-from lfstream.io.readers import LAZY_EXTS, LoadedLF, ReadOptions, VideoLF, load_lf, open_video_lf, read_lf, reads_lazily
+from lfstream.io.readers import (
+    LAZY_EXTS,
+    LoadedLF,
+    ReadOptions,
+    VideoLF,
+    load_lf,
+    open_lf_frames,
+    open_video_lf,
+    read_lf,
+    reads_lazily,
+)
 from lfstream.io.video import (
     GRID_METADATA_KEY,
     GRID_METADATA_PREFIX,
@@ -38,6 +48,7 @@ __all__ = [
     "load_lf",
     "read_lf",
     "open_video_lf",
+    "open_lf_frames",
     "reads_lazily",
     "LAZY_EXTS",
     "write_lf",

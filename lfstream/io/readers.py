@@ -183,9 +183,7 @@ def _assemble_views(
     load_view,
     allow_missing: bool,
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    missing = [(r, c) for r in range(grid[0]) for c in range(grid[1]) if (r, c) not in views]
-    if missing and not allow_missing:
-        raise LFMissingViewsError(_missing_message(folder, missing, grid), missing)
+    missing = _missing_views(folder, views, grid, allow_missing)
     from concurrent.futures import ThreadPoolExecutor
 
     lf: np.ndarray | None = None
@@ -202,12 +200,25 @@ def _assemble_views(
                 raise LFShapeError(f"{src}: view shape {img.shape} differs from {first[1]} {first[0]}")
             lf[..., r, c, :, :, :] = img
     assert lf is not None
-    if not missing:
-        return lf, None
+    return lf, _present_mask(views, grid) if missing else None
+
+
+def _missing_views(folder: Path, views: dict[tuple[int, int], object], grid: tuple[int, int],
+                   allow_missing: bool) -> list[tuple[int, int]]:
+    """The grid positions without a view; refused (:class:`LFMissingViewsError`) unless
+    ``allow_missing``."""
+    missing = [(r, c) for r in range(grid[0]) for c in range(grid[1]) if (r, c) not in views]
+    if missing and not allow_missing:
+        raise LFMissingViewsError(_missing_message(folder, missing, grid), missing)
+    return missing
+
+
+def _present_mask(views: dict[tuple[int, int], object], grid: tuple[int, int]) -> np.ndarray:
+    """The ``grid`` mask of the positions that have a view."""
     present = np.zeros(grid, bool)
     for r, c in views:
         present[r, c] = True
-    return lf, present
+    return present
 
 
 def _read_rgb_view(p: Path) -> np.ndarray:
@@ -319,12 +330,13 @@ def _frame_entries(folder: Path) -> list[Path]:
     return sorted(p for p in folder.iterdir() if not p.name.startswith("."))
 
 
-def _lazy_folder_kind(folder: Path) -> str | None:
+def _lazy_folder_kind(folder: Path, kind: str | None = None) -> str | None:
     """``"view-videos"`` (one video per view) or ``"frame-folders"`` (one sub-folder of view
     images per frame, as :func:`lfstream.io.write_lf` and ``lfstream decode`` write a video,
     or one single-frame ``.npy`` per frame), which :func:`open_video_lf` reads frame by frame;
-    ``None`` for other folders (read whole)."""
-    kind = _classify_folder(folder)
+    ``None`` for other folders (read whole). ``kind``: :func:`_classify_folder`'s answer,
+    where the caller has it."""
+    kind = kind or _classify_folder(folder)
     if kind == "view-videos":
         return kind
     entries = _frame_entries(folder) if kind == "frames-folder" else []
@@ -450,9 +462,9 @@ VIEW_DECODER_THREADS = 2
 
 def _view_videos(folder: Path, opts: ReadOptions, count_frames: bool):
     """:func:`open_video_lf` of a folder of one video per view (``R_C.mp4``, ...): each light
-    field assembled from one frame of every view's video; the views' sizes and frame counts checked from their containers
-    before any frame is decoded (:data:`VIEW_DECODER_THREADS` threads a decoder). Returns
-    ``(frames, fps, count, views, size, present)``.
+    field assembled from one frame of every view's video; the views' sizes and frame counts
+    checked from their containers before any frame is decoded (:data:`VIEW_DECODER_THREADS`
+    threads a decoder). Returns ``(frames, fps, count, views, size, present)``.
 
     Raises:
         LFMissingViewsError: a view without a video (unless ``opts.allow_missing``).
@@ -461,9 +473,7 @@ def _view_videos(folder: Path, opts: ReadOptions, count_frames: bool):
     """
     _, views, found = _scan_view_files(folder, VIDEO_EXTS)
     grid = opts.grid or found
-    missing = [(r, c) for r in range(grid[0]) for c in range(grid[1]) if (r, c) not in views]
-    if missing and not opts.allow_missing:
-        raise LFMissingViewsError(_missing_message(folder, missing, grid), missing)
+    missing = _missing_views(folder, views, grid, opts.allow_missing)
     if any(r >= grid[0] or c >= grid[1] for r, c in views):
         raise LFFormatError(f"{folder}: views beyond the grid {grid[0]}x{grid[1]}")
     infos = {k: video_info(p, count_frames=count_frames) for k, p in sorted(views.items())}
@@ -476,11 +486,7 @@ def _view_videos(folder: Path, opts: ReadOptions, count_frames: bool):
         k1 = next(k for k, info in infos.items() if info.count != first.count)
         raise LFShapeError(f"{folder}: the view videos hold different frame counts ({views[k0].name} {first.count}, "
                            f"{views[k1].name} {infos[k1].count})")
-    present = None
-    if missing:
-        present = np.zeros(grid, bool)
-        for r, c in views:
-            present[r, c] = True
+    present = _present_mask(views, grid) if missing else None
     h, w = first.size
 
     def frames() -> Iterator[np.ndarray]:
@@ -518,16 +524,18 @@ def _frame_folders(folder: Path, opts: ReadOptions, count_frames: bool = False):
     def frames() -> Iterator[np.ndarray]:
         for k, entry in enumerate(entries[: opts.max_frames]):
             loaded = first if k == 0 else load_lf(entry, inner)
-            same_mask = (loaded.present is None and first.present is None) or (
-                loaded.present is not None and first.present is not None
-                and np.array_equal(loaded.present, first.present))
-            if loaded.lf.shape != first.lf.shape or not same_mask:
+            if loaded.lf.shape != first.lf.shape or not np.array_equal(_mask_of(loaded), _mask_of(first)):
                 raise LFShapeError(f"{entry}: a frame of {loaded.lf.shape} (views present: "
                                    f"{'all' if loaded.present is None else int(loaded.present.sum())}) unlike "
                                    f"{entries[0].name}'s {first.lf.shape}")
             yield np.ascontiguousarray(loaded.lf)
 
     return frames(), None, len(entries), first.lf.shape[:2], first.lf.shape[2:4], first.present
+
+
+def _mask_of(loaded: LoadedLF) -> np.ndarray:
+    """A loaded light field's views-present mask, all ``True`` where it has none."""
+    return np.ones(loaded.lf.shape[-5:-3], bool) if loaded.present is None else loaded.present
 
 
 def _next_view(reader: Iterator[np.ndarray], lf: np.ndarray, k: tuple[int, int], path: Path) -> bool:
@@ -539,6 +547,20 @@ def _next_view(reader: Iterator[np.ndarray], lf: np.ndarray, k: tuple[int, int],
         raise LFShapeError(f"{path}: a frame of shape {img.shape}, the views' are {lf.shape[2:]}")
     lf[k] = img
     return True
+
+
+def open_lf_frames(path: str | os.PathLike, options: ReadOptions | None = None) -> VideoLF:
+    """Any light field as frames, one at a time: an LF video lazily (:func:`open_video_lf`),
+    anything else read whole (:func:`load_lf`) and handed out frame by frame; ``present``
+    ``None`` where every view exists. The one door for callers that process frame by frame
+    (the stream's source, ``lfstream batch``)."""
+    opts = options or ReadOptions()
+    if reads_lazily(path):
+        return open_video_lf(path, opts)
+    loaded = load_lf(path, opts)
+    lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
+    present = None if loaded.present is None or loaded.present.all() else loaded.present
+    return VideoLF(iter(lf), loaded.fps, len(lf), tuple(lf.shape[1:3]), tuple(lf.shape[3:5]), Path(path), present)
 
 
 def load_lf(path: str | os.PathLike, options: ReadOptions | None = None, **kwargs) -> LoadedLF:
@@ -632,19 +654,17 @@ def _apply_flips(loaded: LoadedLF, flip_u: bool, flip_v: bool) -> None:
 
 def _load_folder(folder: Path, opts: ReadOptions) -> LoadedLF:
     kind = _classify_folder(folder)
+    lazy = _lazy_folder_kind(folder, kind)
+    if lazy is not None:  # an LF video folder: the lazy reader's frames, collected
+        # (the crop and flips come after, as for any folder)
+        video = open_video_lf(folder, dataclasses.replace(opts, crop=None, flip_u=False, flip_v=False))
+        return LoadedLF(lf=collect_frames(video.frames, video.count, folder),
+                        format="view-videos" if lazy == "view-videos" else "frames-folder", path=folder,
+                        present=video.present, fps=video.fps)
     if kind == "sai-folder":
         _, views, found_grid = _scan_view_files(folder, IMAGE_EXTS)
         lf, present = _assemble_views(folder, views, opts.grid or found_grid, _read_rgb_view, opts.allow_missing)
         return LoadedLF(lf=lf, format="sai-folder", path=folder, present=present)
-    if kind == "view-videos":
-        # the lazy reader's frames, collected (the crop and flips come after, as for any folder)
-        video = open_video_lf(folder, dataclasses.replace(opts, crop=None, flip_u=False, flip_v=False))
-        return LoadedLF(lf=collect_frames(video.frames, video.count, folder), format="view-videos", path=folder,
-                        present=video.present, fps=video.fps)
-    if _lazy_folder_kind(folder) == "frame-folders":  # the lazy reader's frames, collected
-        video = open_video_lf(folder, dataclasses.replace(opts, crop=None, flip_u=False, flip_v=False))
-        return LoadedLF(lf=collect_frames(video.frames, video.count, folder), format="frames-folder", path=folder,
-                        present=video.present, fps=video.fps)
     # frames-folder: every entry one frame (or a clip), concatenated along T in name order.
     entries = _frame_entries(folder)
     parts: list[np.ndarray] = []
@@ -698,4 +718,5 @@ def read_lf(
     return loaded.lf, present
 
 
-__all__ = ["ReadOptions", "LoadedLF", "VideoLF", "LAZY_EXTS", "load_lf", "read_lf", "open_video_lf", "reads_lazily"]
+__all__ = ["ReadOptions", "LoadedLF", "VideoLF", "LAZY_EXTS", "load_lf", "read_lf", "open_video_lf", "open_lf_frames",
+           "reads_lazily"]

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from lfstream.errors import LFValueError
-from lfstream.io.readers import ReadOptions, load_lf, open_video_lf, reads_lazily
+from lfstream.io.readers import ReadOptions, open_lf_frames
 
 #: Bump when the renderer's output changes, so stale cached clips are not reused.
 BUILTIN_CLIP_VERSION = 1
@@ -181,27 +181,15 @@ class Source:
 
 
 def file_source(path: str | os.PathLike, options: ReadOptions | None = None) -> Source:
-    """The frames of an LF file; mosaic videos and ``.lfs`` streams are read lazily (one
-    frame in memory at a time). With ``options.allow_missing`` a folder with missing views streams: the encoder
-    sends the centre view (which must exist) and the metrics count the present views only."""
+    """The frames of an LF file (:func:`lfstream.io.open_lf_frames`: LF videos read lazily,
+    one frame in memory at a time). With ``options.allow_missing`` a folder with missing
+    views streams: the encoder sends the centre view (which must exist) and the metrics count
+    the present views only."""
     opts = options or ReadOptions()
-    path = Path(path)
-    if reads_lazily(path):
-        # frame by frame, crop and flips applied (the flips were once skipped here)
-        video = open_video_lf(path, opts)
-        if video.present is not None and not video.present[video.views[0] // 2, video.views[1] // 2]:
-            raise LFValueError(f"{path}: the centre view is missing; it is the view the codec sends")
-        return Source(video.frames, video.fps, video.present, video.count or opts.max_frames)
-    loaded = load_lf(path, opts)
-    present = loaded.present
-    if present is not None and present.all():
-        present = None
-    if present is not None:
-        u, v = present.shape
-        if not present[u // 2, v // 2]:
-            raise LFValueError(f"{path}: the centre view is missing; it is the view the codec sends")
-    lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
-    return Source(iter(lf), loaded.fps, present, len(lf))
+    video = open_lf_frames(path, opts)
+    if video.present is not None and not video.present[video.views[0] // 2, video.views[1] // 2]:
+        raise LFValueError(f"{path}: the centre view is missing; it is the view the codec sends")
+    return Source(video.frames, video.fps, video.present, video.count or opts.max_frames)
 
 
 __all__ = ["BUILTIN_CLIP_VERSION", "PRERENDER_MAX_FRAMES", "Source", "cache_dir", "synthetic_source",
