@@ -201,6 +201,17 @@ def check_crop(views: tuple[int, int], k: int) -> None:
         raise LFValueError(f"views: crop size must be an integer in 1..{min(u, v)}, got {k!r}")
 
 
+def check_first_frame(first_frame: object, count: int | None = None, source: object = None) -> None:
+    """Raises :class:`LFValueError` unless ``first_frame`` is a video frame index (an
+    integer, 0 or more) a reader or decoder can start at: below ``count``, the frames of
+    the video ``source`` where it is known."""
+    if not isinstance(first_frame, (int, np.integer)) or isinstance(first_frame, bool) or first_frame < 0:
+        raise LFValueError(f"first_frame: a frame index (0 or more), got {first_frame!r}")
+    if count is not None and first_frame >= count:
+        where = f"{source}: " if source is not None else ""
+        raise LFValueError(f"{where}first_frame {first_frame}: it holds {count} frame(s), 0..{count - 1}")
+
+
 def crop_views(lf: ArrayT, k: int) -> ArrayT:
     """Keeps the central ``k x k`` views, so the centre view stays the centre view.
 
@@ -486,6 +497,7 @@ __all__ = [
     "centre_index",
     "centre_view",
     "check_crop",
+    "check_first_frame",
     "crop_views",
     "downsample_angular",
     "to_sensor",

@@ -95,12 +95,20 @@ def add_read_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--flip-v", action="store_true", help="reverse the order of view columns")
     g.add_argument("--allow-missing", action="store_true", help="load a folder with missing views, with a mask")
     g.add_argument("--max-frames", type=int_in((1, 1 << 30)), help="read at most this many frames")
+    add_first_frame(g)
+
+
+def add_first_frame(p) -> None:
+    """``--first-frame N``: where a command starts reading an LF video (with ``--max-frames``, a range)."""
+    p.add_argument("--first-frame", type=int_in((0, 1 << 30)), default=0,
+                   help="start at this frame of a video (0: the first; the frames before are skipped, decoding "
+                   "as little of them as the format allows)")
 
 
 def read_options(args: argparse.Namespace) -> ReadOptions:
     """The :class:`ReadOptions` the reading flags describe."""
     return ReadOptions(angular=args.angular, crop=args.crop, grid=args.grid, flip_u=args.flip_u, flip_v=args.flip_v,
-                       allow_missing=args.allow_missing, max_frames=args.max_frames)
+                       allow_missing=args.allow_missing, max_frames=args.max_frames, first_frame=args.first_frame)
 
 
 def load_from_args(args: argparse.Namespace):
@@ -225,5 +233,5 @@ def emit(args: argparse.Namespace, result: dict, text: Callable[[dict], str] | s
         print(text(result) if callable(text) else text)
 
 
-__all__ = ["parse_grid", "parse_size", "parse_float_list", "int_in", "float_in", "add_read_options", "read_options",
-           "load_from_args", "InputFrames", "read_input", "emit", "interrupt_after"]
+__all__ = ["parse_grid", "parse_size", "parse_float_list", "int_in", "float_in", "add_read_options", "add_first_frame",
+           "read_options", "load_from_args", "InputFrames", "read_input", "emit", "interrupt_after"]

@@ -6,7 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
-from lfstream.cli._common import emit, int_in, interrupt_after
+from lfstream.cli._common import add_first_frame, emit, int_in, interrupt_after
 from lfstream.codec.decoder import BATCH_RANGE, DEPTH_MODES, HANCE_MODES
 
 HELP = "decode an .lfs stream to a light field (.npy, folder or video)"
@@ -29,6 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1,
                    help="frames per network batch (and per warp, on a CUDA device)")
     p.add_argument("--disparity-out", type=Path, help="folder for the centre-view disparity of each frame (PFM)")
+    add_first_frame(p)
+    p.add_argument("--max-frames", type=int_in((1, 1 << 30)), help="decode at most this many frames")
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--json", action="store_true")
 
@@ -39,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.errors import BitstreamError, LFFileError
     from lfstream.io import FrameWriter, write_lf, write_pfm
     from lfstream.io._fs import check_new_file, prepare_output_dir
+    from lfstream.lightfield import check_first_frame
 
     check_new_file(args.output, args.overwrite)
     if args.disparity_out is not None:
@@ -56,13 +59,19 @@ def run(args: argparse.Namespace) -> int:
         with open(args.input, "rb") as fh:
             header = read_header(fh)
             fps = header.fps
-            if args.output.suffix.lower() in (".npy", ".npz"):
-                expected = count_packets(fh, header)[0]  # the frames up to any damage
+            if args.output.suffix.lower() in (".npy", ".npz") or args.first_frame:
+                available = count_packets(fh, header)[0]  # the frames up to any damage
+                if args.first_frame and available:  # (none: the decode names the damage)
+                    check_first_frame(args.first_frame, available, args.input)
+                expected = max(0, available - args.first_frame)
+                if args.max_frames is not None:
+                    expected = min(expected, args.max_frames)
                 video = None if by_frame else video_array(header, expected)
             fh.seek(0)
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
-                                 device=args.device, batch=args.batch, deblock=not args.no_deblock, out=video):
+                                 device=args.device, batch=args.batch, deblock=not args.no_deblock, out=video,
+                                 first_frame=args.first_frame, max_frames=args.max_frames):
                 with interrupt_after():  # a frame's outputs are written whole
                     if by_frame:
                         t_write = time.perf_counter()
@@ -99,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         done = (f"{count} complete frame(s) before it written to {args.output}" if count
                 else "no complete frame, nothing written")
         raise BitstreamError(f"{args.input}: {error} ({done})")
-    result = {"frames": count, "decode_s": decode_s, "output": str(args.output)}
-    emit(args, result, f"{count} frame(s) decoded in {decode_s:.3f} s -> {args.output}")
+    result = {"frames": count, "first_frame": args.first_frame, "decode_s": decode_s, "output": str(args.output)}
+    which = f" (from frame {args.first_frame})" if args.first_frame else ""
+    emit(args, result, f"{count} frame(s){which} decoded in {decode_s:.3f} s -> {args.output}")
     return 0

@@ -44,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.errors import LFStreamError
+    from lfstream.errors import LFStreamError, LFValueError
     from lfstream.io._fs import fresh_dir, prepare_output_dir, remove_if_made_empty
     from lfstream.stream import Pipeline, Source, file_source, render_builtin_clip, synthetic_source
     from lfstream.stream.report import stopped_summary
@@ -63,6 +63,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         try:
             if args.input is None:
+                if args.first_frame or args.max_frames is not None:
+                    raise LFValueError("--first-frame, --max-frames: they choose the frames of an input file; the "
+                                       "built-in clip takes --frames N")
                 # rendered into its cache while the kernels load, where it is not there yet
                 # (and not so long that the wait would outlast them: PRERENDER_MAX_FRAMES)
                 ahead = args.frames <= PRERENDER_MAX_FRAMES

@@ -30,6 +30,7 @@ from lfstream.codec.residual import VIEW_MODES, apply_residual, decode_residual,
 from lfstream.codec.shading import GainDecoder, GainReferenceError
 from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.errors import BitstreamError, LFFileError, LFValueError
+from lfstream.lightfield import check_first_frame
 
 DEPTH_MODES = ("auto", "hint", "flat", "net")
 HANCE_MODES = ("auto", "on", "off")
@@ -455,26 +456,42 @@ def _to_host(tensor) -> np.ndarray:
 
 def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
                 max_frames: int | None = None, hance: str = "auto", device: str = "cpu",
-                batch: int = 1, deblock: bool = True, out: np.ndarray | None = None) -> Iterator[DecodedFrame]:
+                batch: int = 1, deblock: bool = True, out: np.ndarray | None = None,
+                first_frame: int = 0) -> Iterator[DecodedFrame]:
     """Decodes a stream frame by frame (networks batched over ``batch`` frames); every
     complete frame before a damaged packet is yielded, then :class:`BitstreamError` names
     the damaged frame. ``deblock``: :attr:`Decoder.deblock`. ``out``: a ``(T, U, V, H, W,
-    3)`` uint8 array frame ``k`` (``k < T``) is decoded into (:meth:`Decoder.decode_batch`);
-    later frames get arrays of their own."""
+    3)`` uint8 array the ``k``-th frame decoded (``k < T``) goes into
+    (:meth:`Decoder.decode_batch`); later frames get arrays of their own.
+
+    ``first_frame``: the stream's frame to start at; the packets before it are only
+    followed (:meth:`Decoder.follow`: their hints and gain maps read, so that the deltas
+    after them resolve; nothing warped), so the frames decoded are byte for byte those of
+    a decode from the start. ``max_frames`` counts from it. Each frame keeps its stream
+    index as :attr:`DecodedFrame.seq`."""
     lo, hi = BATCH_RANGE
     if not isinstance(batch, int) or not lo <= batch <= hi:
         raise LFValueError(f"batch: an integer in {lo}..{hi}, got {batch!r}")
+    check_first_frame(first_frame)
     header = read_header(fh, limits)
     dec = Decoder(header, depth=depth, occlusion=occlusion, hance=hance, device=device, deblock=deblock)
     pending: list[Packet] = []
 
+    done = 0  # frames decoded: the index into ``out`` of the next
+
     def decoded(packets: list[Packet]) -> list[DecodedFrame]:
-        dests = None if out is None else [out[p.seq] if p.seq < len(out) else None for p in packets]
+        nonlocal done
+        dests = None if out is None else [out[k] if k < len(out) else None
+                                          for k in range(done, done + len(packets))]
+        done += len(packets)
         return dec.decode_batch(packets, out=dests)
 
     try:
         for k, packet in enumerate(iter_packets(fh, header, limits)):
-            if max_frames is not None and k >= max_frames:
+            if k < first_frame:
+                dec.follow(packet)
+                continue
+            if max_frames is not None and k - first_frame >= max_frames:
                 break
             pending.append(packet)
             if len(pending) >= batch:
@@ -499,8 +516,11 @@ def stack_frames(frames: list[np.ndarray]) -> np.ndarray:
 
 
 def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
-           hance: str = "auto", device: str = "cpu", deblock: bool = True) -> np.ndarray:
-    """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8 (``deblock``: :attr:`Decoder.deblock`).
+           hance: str = "auto", device: str = "cpu", deblock: bool = True, first_frame: int = 0,
+           max_frames: int | None = None) -> np.ndarray:
+    """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8 (``deblock``: :attr:`Decoder.deblock`);
+    ``first_frame``, ``max_frames``: a range of the stream's frames (:func:`iter_decode`:
+    the same bytes as those frames of a whole decode).
 
     The frames are decoded into one array sized by the packets counted first
     (:func:`video_array`), not decoded apart and then stacked: the built-in clip's 12
@@ -513,16 +533,21 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
     """
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise LFValueError(f"data: expected bytes, got {type(data).__name__}")
+    check_first_frame(first_frame)
     buf = io.BytesIO(bytes(data))
     try:
         header = read_header(buf, limits)
-        out = video_array(header, count_packets(buf, header, limits)[0])
+        count = count_packets(buf, header, limits)[0]
     except BitstreamError:  # a damaged header: the decode below names it
-        out = None
+        count = None
+    if count:
+        check_first_frame(first_frame, count, "stream")
+    out = None if count is None else video_array(header, max(0, count - first_frame), max_frames)
     buf.seek(0)
     frames: list[np.ndarray] = []
     try:
-        for f in iter_decode(buf, depth, occlusion, limits, hance=hance, device=device, deblock=deblock, out=out):
+        for f in iter_decode(buf, depth, occlusion, limits, hance=hance, device=device, deblock=deblock, out=out,
+                             first_frame=first_frame, max_frames=max_frames):
             frames.append(f.lf)
     except BitstreamError as exc:
         exc.partial = frames_array(frames, out) if frames else None  # type: ignore[attr-defined]
@@ -568,27 +593,33 @@ def frames_array(frames: list[np.ndarray], out: np.ndarray | None) -> np.ndarray
 
 
 def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | None = None,
-                hance: str = "auto", device: str = "cpu") -> tuple[np.ndarray, float]:
-    """Decodes an ``.lfs`` file; returns ``(lf, fps)``."""
+                hance: str = "auto", device: str = "cpu", first_frame: int = 0) -> tuple[np.ndarray, float]:
+    """Decodes an ``.lfs`` file (from frame ``first_frame``, :func:`iter_decode`); returns
+    ``(lf, fps)``."""
     path = Path(path)
+    check_first_frame(first_frame)
     with _errors_naming(path), open(path, "rb") as fh:
         header = read_header(fh)
-        out = video_array(header, count_packets(fh, header)[0], max_frames)
+        count = count_packets(fh, header)[0]
+        if count:  # (none: the decode below names the damage)
+            check_first_frame(first_frame, count, path)
+        out = video_array(header, max(0, count - first_frame), max_frames)
         fh.seek(0)
         frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device,
-                                            out=out)]
+                                            out=out, first_frame=first_frame)]
     if not frames:
         raise BitstreamError(f"{path}: stream holds no frames")
     return frames_array(frames, out), header.fps
 
 
-def lfs_frames(path: str | os.PathLike, max_frames: int | None = None
+def lfs_frames(path: str | os.PathLike, max_frames: int | None = None, first_frame: int = 0
                ) -> tuple[Iterator[np.ndarray], StreamHeader, int]:
     """An ``.lfs`` file as a light field for the readers (:func:`lfstream.io.open_video_lf`,
     :func:`lfstream.io.load_lf`): its frames decoded one at a time as :func:`decode` decodes
     them (the hint where the stream has one), its header (frame rate, views, view size),
-    and its frame count (at most ``max_frames``; the packets are counted, checksums and
-    all, before any is decoded). It
+    and its frame count (the packets are counted, checksums and all, before any is
+    decoded); from frame ``first_frame`` (:func:`iter_decode`) for at most ``max_frames``,
+    the count the stream's whole. It
     was decoded whole with flat disparity, for ``info``, which reads headers now: every
     other command given an ``.lfs`` (``refocus``, ``stream``, ``view``) then saw the centre
     view copied to every view, a light field without parallax.
@@ -608,10 +639,10 @@ def lfs_frames(path: str | os.PathLike, max_frames: int | None = None
 
     def frames() -> Iterator[np.ndarray]:
         with _errors_naming(path), open(path, "rb") as fh:
-            for f in iter_decode(fh, max_frames=max_frames):
+            for f in iter_decode(fh, max_frames=max_frames, first_frame=first_frame):
                 yield f.lf
 
-    return frames(), header, min(count, max_frames or count)
+    return frames(), header, count
 
 
 @contextmanager

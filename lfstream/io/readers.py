@@ -33,7 +33,7 @@ import numpy as np
 from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError, LFValueError
 from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image
 from lfstream.io.video import VIDEO_EXTS, collect_frames, iter_video_frames, video_info
-from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_crop, check_lf, crop_views, from_mosaic
+from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_crop, check_first_frame, check_lf, crop_views, from_mosaic
 
 _RE_RC = re.compile(r"^(\d+)_(\d+)$")
 _RE_HCI = re.compile(r"^input_Cam(\d{3})$")
@@ -54,6 +54,10 @@ class ReadOptions:
         allow_missing: load a folder with missing views, zero-filled, with ``present`` set;
             without it missing views raise :class:`~lfstream.errors.LFMissingViewsError`.
         max_frames: read at most this many frames of a video.
+        first_frame: the video's frame to start at (0: its first); the frames before it
+            are skipped, decoding as little of them as the format allows (an intra-only
+            video, such as an ``.avi``, decodes none; an ``.lfs`` stream only reads their
+            hints and gain maps). With ``max_frames``, a range.
     """
 
     angular: int | None = None
@@ -63,8 +67,10 @@ class ReadOptions:
     flip_v: bool = False
     allow_missing: bool = False
     max_frames: int | None = None
+    first_frame: int = 0
 
     def __post_init__(self) -> None:
+        check_first_frame(self.first_frame)
         if self.max_frames is not None and (not isinstance(self.max_frames, (int, np.integer)) or self.max_frames < 1):
             raise LFValueError(f"max_frames: a positive integer, got {self.max_frames!r}")
         if self.crop is not None and (not isinstance(self.crop, (int, np.integer)) or self.crop < 1):
@@ -248,7 +254,9 @@ def _check_declared_size(fh, available: int, name: str) -> None:
                             f"bytes), the file holds {max(available - fh.tell(), 0)}: truncated or not an array file")
 
 
-def _read_array_file(path: Path) -> LoadedLF:
+def _read_array_file(path: Path, opts: ReadOptions = ReadOptions()) -> LoadedLF:
+    """A ``.npy`` or ``.npz`` light field, the frames of ``opts``' range only where it is a
+    video (a ``.npy``'s range copied out of the mapped file: the rest is never read)."""
     magic, what = _ARRAY_MAGIC[path.suffix.lower()]
     try:
         with open(path, "rb") as fh:
@@ -261,7 +269,8 @@ def _read_array_file(path: Path) -> LoadedLF:
         if path.suffix.lower() == ".npy":
             with open(path, "rb") as fh:
                 _check_declared_size(fh, path.stat().st_size, str(path))
-            lf = np.load(path, allow_pickle=False)
+            ranged = opts.first_frame > 0 or opts.max_frames is not None
+            lf = np.load(path, allow_pickle=False, mmap_mode="r" if ranged else None)
             disparity = None
             fmt = "npy"
         else:
@@ -287,7 +296,20 @@ def _read_array_file(path: Path) -> LoadedLF:
         check_lf(lf, name=str(path))
     except LFShapeError as exc:
         raise LFFormatError(str(exc)) from exc
+    if lf.ndim == 6:
+        if disparity is not None and disparity.ndim == 5 and len(disparity) == len(lf):
+            disparity = _frame_range(disparity, opts, path)
+        lf = _frame_range(lf, opts, path)
+    if isinstance(lf, np.memmap):  # the range, copied out of the mapped file (or the still, whole)
+        lf = np.array(lf)
     return LoadedLF(lf=lf, format=fmt, path=path, disparity=disparity)
+
+
+def _frame_range(frames: np.ndarray, opts: ReadOptions, path: Path) -> np.ndarray:
+    """The frames ``opts`` asks for (``first_frame``, ``max_frames``) of a ``(T, ...)`` array."""
+    _range_count(len(frames), opts, path)
+    stop = None if opts.max_frames is None else opts.first_frame + opts.max_frames
+    return frames[opts.first_frame:stop]
 
 
 def _classify_folder(folder: Path) -> str:
@@ -413,7 +435,8 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
         import importlib
 
         module, name = _LAYERED_READERS[path.suffix.lower()]
-        decoded, header, count = getattr(importlib.import_module(module), name)(path, max_frames=opts.max_frames)
+        decoded, header, count = getattr(importlib.import_module(module), name)(path, max_frames=opts.max_frames,
+                                                                                first_frame=opts.first_frame)
         fps, views, size = header.fps, header.views, header.size
     else:
         info = video_info(path, count_frames=count_frames)
@@ -426,7 +449,7 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
         views, size = (u, v), (mh // u, mw // v)
 
         def mosaics() -> Iterator[np.ndarray]:  # the video is opened for decoding at the first frame asked for
-            for img in iter_video_frames(path, opts.max_frames):
+            for img in iter_video_frames(path, opts.max_frames, first_frame=opts.first_frame):
                 yield from_mosaic(img, grid)
 
         decoded = mosaics()
@@ -435,8 +458,7 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
         views = (opts.crop, opts.crop)
         present = None if present is None else np.ascontiguousarray(crop_views(present[..., None, None, None],
                                                                               opts.crop)[..., 0, 0, 0])
-    if count and opts.max_frames:
-        count = min(count, opts.max_frames)
+    count = _range_count(count, opts, path)
     flips = tuple(a for a, f in ((0, opts.flip_u), (1, opts.flip_v)) if f)
     if present is not None and flips:
         present = np.ascontiguousarray(np.flip(present, axis=flips))
@@ -444,12 +466,30 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
         present = None
 
     def frames() -> Iterator[np.ndarray]:
+        n = 0
         for lf in decoded:
             if opts.crop is not None:
                 lf = crop_views(lf, opts.crop)
+            n += 1
             yield np.ascontiguousarray(np.flip(lf, axis=flips) if flips else lf)
+        if n == 0 and opts.first_frame:  # a count the container did not record
+            raise LFValueError(f"{path}: first_frame {opts.first_frame}: the video ends before it")
 
     return VideoLF(frames(), fps, count, tuple(views), tuple(size), path, present)
+
+
+def _range_count(count: int | None, opts: ReadOptions, path: Path) -> int | None:
+    """How many frames a video of ``count`` frames gives read from ``opts.first_frame`` for at
+    most ``opts.max_frames`` (``None`` where the count is not known).
+
+    Raises:
+        LFValueError: the first frame asked for is past the video's end.
+    """
+    if not count:
+        return count
+    check_first_frame(opts.first_frame, count, path)
+    left = count - opts.first_frame
+    return min(left, opts.max_frames) if opts.max_frames else left
 
 
 #: Decoder threads of each view's video in a folder of view videos: one decoder a view, all
@@ -490,7 +530,7 @@ def _view_videos(folder: Path, opts: ReadOptions, count_frames: bool):
     h, w = first.size
 
     def frames() -> Iterator[np.ndarray]:
-        readers = {k: iter_video_frames(p, opts.max_frames, threads=VIEW_DECODER_THREADS)
+        readers = {k: iter_video_frames(p, opts.max_frames, threads=VIEW_DECODER_THREADS, first_frame=opts.first_frame)
                    for k, p in sorted(views.items())}
         try:
             while True:
@@ -517,12 +557,15 @@ def _frame_folders(folder: Path, opts: ReadOptions, count_frames: bool = False):
     Raises:
         LFShapeError: a frame whose views, size or missing views differ from the first's.
     """
-    entries = _frame_entries(folder)
+    everything = _frame_entries(folder)
+    _range_count(len(everything), opts, folder)  # a first frame past the end: refused before any is read
+    stop = None if opts.max_frames is None else opts.first_frame + opts.max_frames
+    entries = everything[opts.first_frame:stop]
     inner = ReadOptions(angular=opts.angular, grid=opts.grid, allow_missing=opts.allow_missing)
     first = load_lf(entries[0], inner)
 
     def frames() -> Iterator[np.ndarray]:
-        for k, entry in enumerate(entries[: opts.max_frames]):
+        for k, entry in enumerate(entries):
             loaded = first if k == 0 else load_lf(entry, inner)
             if loaded.lf.shape != first.lf.shape or not np.array_equal(_mask_of(loaded), _mask_of(first)):
                 raise LFShapeError(f"{entry}: a frame of {loaded.lf.shape} (views present: "
@@ -530,7 +573,7 @@ def _frame_folders(folder: Path, opts: ReadOptions, count_frames: bool = False):
                                    f"{entries[0].name}'s {first.lf.shape}")
             yield np.ascontiguousarray(loaded.lf)
 
-    return frames(), None, len(entries), first.lf.shape[:2], first.lf.shape[2:4], first.present
+    return frames(), None, len(everything), first.lf.shape[:2], first.lf.shape[2:4], first.present
 
 
 def _mask_of(loaded: LoadedLF) -> np.ndarray:
@@ -585,9 +628,7 @@ def load_lf(path: str | os.PathLike, options: ReadOptions | None = None, **kwarg
     else:
         ext = path.suffix.lower()
         if ext in (".npy", ".npz"):
-            loaded = _read_array_file(path)
-            if opts.max_frames is not None and loaded.lf.ndim == 6:
-                loaded.lf = loaded.lf[: opts.max_frames]
+            loaded = _read_array_file(path, opts)
         elif ext in LAZY_EXTS:
             # crop and flips frame by frame as it is read (one copy of each frame)
             video = open_video_lf(path, opts)
@@ -610,6 +651,8 @@ def load_lf(path: str | os.PathLike, options: ReadOptions | None = None, **kwarg
             raise LFFormatError(f"{path}: a PFM file holds a disparity map, not a light field (use read_pfm)")
         else:
             raise LFFormatError(f"{path}: unknown light-field format {ext or '(no extension)'}")
+    if opts.first_frame and loaded.lf.ndim == 5:
+        raise LFValueError(f"{path}: first_frame {opts.first_frame}: a single light field, not a video")
     if crop is not None:
         _apply_crop(loaded, crop)
     if opts.flip_u or opts.flip_v:
@@ -681,12 +724,14 @@ def _load_folder(folder: Path, opts: ReadOptions) -> LoadedLF:
         if sub.disparity is not None:
             disps.append(sub.disparity if sub.disparity.ndim == 5 else sub.disparity[None])
         fps = fps or sub.fps
-        if opts.max_frames is not None and sum(len(a) for a in parts) >= opts.max_frames:
+        if opts.max_frames is not None and sum(len(a) for a in parts) >= opts.first_frame + opts.max_frames:
             break
     if not parts:
         raise LFFormatError(f"{folder}: no light-field frames found")
-    lf = np.concatenate(parts)[: opts.max_frames]
-    disparity = np.concatenate(disps)[: len(lf)] if len(disps) == len(parts) else None
+    lf = _frame_range(np.concatenate(parts), opts, folder)
+    disparity = None
+    if len(disps) == len(parts):
+        disparity = _frame_range(np.concatenate(disps), opts, folder)
     return LoadedLF(lf=lf, format="frames-folder", path=folder, disparity=disparity, fps=fps)
 
 

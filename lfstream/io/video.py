@@ -63,10 +63,17 @@ def _open_container(path: Path):
         raise LFFormatError(f"{path}: not a readable video ({exc})") from exc
 
 
-def iter_video_frames(path: Path, max_frames: int | None = None, threads: int | None = None) -> Iterator[np.ndarray]:
-    """Yields the frames of a video file as uint8 RGB ``(H, W, 3)``; ``threads``: the
-    decoder's threads (``None``: FFmpeg's choice; 1 where many small videos are decoded side
-    by side, one view each, and their threads would only crowd the cores)."""
+def iter_video_frames(path: Path, max_frames: int | None = None, threads: int | None = None,
+                      first_frame: int = 0) -> Iterator[np.ndarray]:
+    """Yields the frames of a video file as uint8 RGB ``(H, W, 3)``, from frame
+    ``first_frame`` on; ``threads``: the decoder's threads (``None``: FFmpeg's choice; 1
+    where many small videos are decoded side by side, one view each, and their threads
+    would only crowd the cores).
+
+    The frames before ``first_frame`` are skipped as cheaply as the codec allows: an
+    intra-only codec's (Ut Video, the ``.avi`` mosaics) are not decoded at all, only read
+    from the container; others' (x264, FFV1) are decoded, each frame predicting from the
+    ones before, but not converted to RGB."""
     import av
 
     with _open_container(path) as container:
@@ -77,13 +84,34 @@ def iter_video_frames(path: Path, max_frames: int | None = None, threads: int | 
             stream.codec_context.thread_count = int(threads)
         size = _parse_pair(SIZE_METADATA_PREFIX, _tags(container).get(GRID_METADATA_KEY))
         try:
-            for i, frame in enumerate(container.decode(stream)):
+            for i, frame in enumerate(_decoded_from(container, stream, first_frame)):
                 if max_frames is not None and i >= max_frames:
                     break
                 img = frame.to_ndarray(format="rgb24")
                 yield img[: size[0], : size[1]] if size is not None else img
         except av.error.FFmpegError as exc:  # type: ignore[attr-defined]
             raise LFFormatError(f"{path}: video decoding failed ({exc})") from exc
+
+
+def _decoded_from(container, stream, first_frame: int) -> Iterator:
+    """The video stream's decoded frames (PyAV's) from frame ``first_frame`` on, in display
+    order. An intra-only codec's packets are its frames, in order, each decodable alone: the
+    first ``first_frame`` non-empty ones are read and dropped undecoded (an empty packet
+    repeats a frame in AVI and decodes to nothing; the last one flushes the decoder)."""
+    if first_frame <= 0:
+        yield from container.decode(stream)
+        return
+    if stream.codec_context.codec.intra_only:
+        skipped = 0
+        for packet in container.demux(stream):
+            if skipped < first_frame and packet.size > 0:
+                skipped += 1
+                continue
+            yield from packet.decode()
+        return
+    for i, frame in enumerate(container.decode(stream)):
+        if i >= first_frame:
+            yield frame
 
 
 def _tags(container) -> dict[str, str]:

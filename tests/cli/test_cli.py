@@ -809,3 +809,26 @@ def test_a_folder_of_view_videos_streams_and_is_described_without_decoding(capsy
     (folder / "1_1.mp4").unlink()
     code, _, err = run(capsys, "stream", folder, "--allow-missing", "-o", tmp_path / "t")
     assert code == 2 and "centre view is missing" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_frame_range_of_a_video_through_the_commands(capsys, tmp_path):
+    """``--first-frame`` with ``--max-frames`` cuts a clip out of an LF video: ``convert``
+    writes exactly those frames, ``info`` counts them; past the end, or given to ``stream``
+    without an input (the built-in clip takes ``--frames``), it is one line and exit 2,
+    nothing left behind."""
+    import lfstream
+
+    clip = synth_clip(5, 3, (24, 32), seed=7, noise=2.0).lf
+    lfstream.write_lf(tmp_path / "src.avi", clip, fps=10)
+    whole = lfstream.read_lf(tmp_path / "src.avi")
+    code, out, _ = run(capsys, "convert", tmp_path / "src.avi", tmp_path / "cut.avi", "--first-frame", "1",
+                       "--max-frames", "3", "--json")
+    assert code == 0 and json.loads(out)["frames"] == 3
+    np.testing.assert_array_equal(lfstream.read_lf(tmp_path / "cut.avi"), whole[1:4])
+    code, out, _ = run(capsys, "info", tmp_path / "src.avi", "--first-frame", "3", "--json")
+    assert code == 0 and json.loads(out)["frames"] == 2
+    code, _, err = run(capsys, "convert", tmp_path / "src.avi", tmp_path / "late.avi", "--first-frame", "5")
+    assert code == 2 and "first_frame 5: it holds 5 frame(s)" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "late.avi").exists()
+    code, _, err = run(capsys, "stream", "-o", tmp_path / "out", "--first-frame", "2")
+    assert code == 2 and "--first-frame" in err and "--frames" in err and not (tmp_path / "out").exists()

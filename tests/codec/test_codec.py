@@ -372,3 +372,38 @@ def test_an_lfs_file_reads_as_the_light_field_it_decodes_to(tmp_path):
     assert loaded.format == "lfs" and loaded.fps == pytest.approx(12)
     np.testing.assert_array_equal(loaded.lf, lfstream.decode(data))
     assert not (loaded.lf[:, 0, 0] == loaded.lf[:, 2, 2]).all()
+
+
+@pytest.mark.parametrize("options", [{}, {"residual": 40}, {"preset": "balanced", "residual": 40, "residual_mode": "views"}])
+def test_decoding_from_a_later_frame_gives_that_frames_bytes(options, tmp_path, capsys):
+    """``first_frame`` (``lfstream.decode``, ``decode --first-frame``, an ``.lfs`` read with
+    ``ReadOptions.first_frame``): the packets before it are only followed (their hint and
+    gain deltas read), and the frames decoded are byte for byte a whole decode's, for a
+    clip whose hints and gains are deltas (key interval 3: ranges start before, at and
+    after a key frame); ``max_frames`` counts from it; a start past the end is one line."""
+    from lfstream.io import ReadOptions, load_lf
+
+    clip = synth_clip(7, 3, (48, 64), seed=3, noise=2.0, vignetting=0.3, motion=1.0, camera_pan=0.5).lf
+    data = lfstream.encode(clip, hint_options=HintOptions(key_interval=3), **options)
+    whole = lfstream.decode(data)
+    for first in (1, 3, 4, 6):
+        np.testing.assert_array_equal(lfstream.decode(data, first_frame=first), whole[first:])
+    np.testing.assert_array_equal(lfstream.decode(data, first_frame=2, max_frames=2), whole[2:4])
+    with pytest.raises(LFValueError, match="first_frame 7: it holds 7 frame"):
+        lfstream.decode(data, first_frame=7)
+    (tmp_path / "a.lfs").write_bytes(data)
+    np.testing.assert_array_equal(load_lf(tmp_path / "a.lfs", ReadOptions(first_frame=5)).lf, whole[5:])
+    if options:
+        return
+    capsys.readouterr()
+    assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "part.npy"), "--first-frame", "4",
+                 "--max-frames", "2", "--json", "--disparity-out", str(tmp_path / "disp")]) == 0
+    assert json.loads(capsys.readouterr().out) | {"decode_s": 0} == {
+        "frames": 2, "first_frame": 4, "decode_s": 0, "output": str(tmp_path / "part.npy")}
+    np.testing.assert_array_equal(np.load(tmp_path / "part.npy"), whole[4:6])
+    # the maps keep the stream's frame numbers
+    assert sorted(p.name for p in (tmp_path / "disp").iterdir()) == ["frame_000004.pfm", "frame_000005.pfm"]
+    assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "late.mp4"), "--first-frame", "9"]) == 2
+    err = capsys.readouterr().err
+    assert "first_frame 9: it holds 7 frame(s)" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "late.mp4").exists()

@@ -408,3 +408,91 @@ def test_a_folder_of_single_frame_npy_files_is_an_lf_video(tmp_path, rng):
     np.save(tmp_path / "clips" / "b.npy", video[2:])
     assert not reads_lazily(tmp_path / "clips")
     np.testing.assert_array_equal(read_lf(tmp_path / "clips"), video)
+
+
+def _written(tmp_path, video, kind):
+    """``video`` written as ``kind``: a file extension, or a folder of view videos, of frame
+    folders, of single-frame ``.npy`` files, or of clips read whole (``clips``)."""
+    if kind.startswith("."):
+        write_lf(tmp_path / f"v{kind}", video)
+        return tmp_path / f"v{kind}"
+    if kind == "view-videos":
+        return _view_video_folder(tmp_path / "views", video)
+    folder = tmp_path / kind
+    folder.mkdir()
+    for k, frame in enumerate(video):
+        if kind == "frame-folders":
+            write_lf(folder / f"frame_{k:06d}", frame)
+        elif kind == "npy-frames":
+            np.save(folder / f"frame_{k:06d}.npy", frame)
+    if kind == "clips":  # frames 0-2 and 3-5 as two clips: concatenated, then the range
+        np.save(folder / "a.npy", video[:3])
+        np.save(folder / "b.npy", video[3:])
+    return folder
+
+
+@pytest.mark.parametrize("kind", [".avi", ".mp4", ".mkv", ".npy", ".npz", "view-videos", "frame-folders", "npy-frames",
+                                  "clips"])
+def test_a_frame_range_reads_the_frames_a_slice_of_the_whole_gives(tmp_path, rng, kind):
+    """``first_frame`` (``--first-frame``) with ``max_frames``: load_lf and the lazy reader
+    give exactly ``video[first:first + max]`` of every kind of LF video (the count says
+    so where the container knows it: not Matroska's); a first frame past the end is one
+    LFValueError naming the file, before a frame is decoded where the count is known."""
+    from lfstream.errors import LFValueError
+    from lfstream.io import ReadOptions, open_lf_frames
+
+    video = random_lf(rng, (6, 3, 3, 8, 12, 3))
+    path = _written(tmp_path, video, kind)
+    np.testing.assert_array_equal(load_lf(path).lf, video)
+    for first, most in ((0, None), (2, None), (2, 3), (5, None), (4, 9)):
+        want = video[first:None if most is None else first + most]
+        opts = ReadOptions(first_frame=first, max_frames=most)
+        np.testing.assert_array_equal(load_lf(path, opts).lf, want)
+        frames = open_lf_frames(path, opts)
+        assert frames.count in (None, len(want))
+        np.testing.assert_array_equal(np.stack(list(frames.frames)), want)
+    with pytest.raises(LFValueError, match="first_frame 6") as info:
+        load_lf(path, ReadOptions(first_frame=6))
+    assert path.name in str(info.value)
+
+
+def test_frames_skipped_in_an_intra_only_video_are_not_decoded():
+    """An intra-only codec's packets before the first frame are read and dropped without
+    decoding (an empty packet, a repeated frame in AVI, counts as none); an inter codec's
+    are decoded (they predict the later ones), and only the frames from the first on come
+    out."""
+    from types import SimpleNamespace
+
+    from lfstream.io.video import _decoded_from
+
+    decoded = []
+
+    def packet(k, size=1):  # an empty packet decodes to no frame (as FFmpeg's)
+        return SimpleNamespace(size=size, decode=lambda: decoded.append(k) or ([f"frame {k}"] if size else []))
+
+    packets = [packet(0), packet(1), packet("empty", 0), packet(2), packet(3), packet("flush", 0)]
+
+    def container(intra):
+        return SimpleNamespace(demux=lambda stream: iter(packets),
+                               decode=lambda stream: (p for q in packets for p in q.decode()))
+
+    stream = SimpleNamespace(codec_context=SimpleNamespace(codec=SimpleNamespace(intra_only=True)))
+    assert list(_decoded_from(container(True), stream, 2)) == ["frame 2", "frame 3"]
+    assert decoded == ["empty", 2, 3, "flush"]
+    decoded.clear()
+    stream.codec_context.codec.intra_only = False
+    assert list(_decoded_from(container(False), stream, 2)) == ["frame 2", "frame 3"]
+    assert decoded == [0, 1, "empty", 2, 3, "flush"]
+
+
+def test_a_frame_range_of_a_single_light_field_is_refused(tmp_path, rng):
+    from lfstream.errors import LFValueError
+    from lfstream.io import ReadOptions
+
+    write_lf(tmp_path / "still.npy", random_lf(rng, (3, 3, 8, 8, 3)))
+    assert load_lf(tmp_path / "still.npy", ReadOptions(max_frames=1)).lf.shape == (3, 3, 8, 8, 3)
+    with pytest.raises(LFValueError, match="still.npy: first_frame 1: a single light field"):
+        load_lf(tmp_path / "still.npy", ReadOptions(first_frame=1))
+    for bad in (-1, 1.5, True, "2"):
+        with pytest.raises(LFValueError, match="first_frame"):
+            ReadOptions(first_frame=bad)
