@@ -27,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from lfstream.cli._common import interrupt_after, read_input
-    from lfstream.errors import LFFormatError, LFValueError
+    from lfstream.errors import BitstreamError, LFFormatError, LFValueError
     from lfstream.io import FrameWriter, write_lf
     from lfstream.io._fs import check_new_file
 
@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
                 interrupted = True
                 if not done:
                     raise
-            except LFFormatError as exc:  # a video damaged part way: the frames before it, as decode keeps
+            except (LFFormatError, BitstreamError) as exc:  # a video or .lfs damaged part way: the frames
+                # before it, as decode keeps
                 damage = exc
                 if not done:
                     raise
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
             writer.abort()
             raise
         if damage is not None:
-            raise LFFormatError(f"{damage} ({done} complete frame(s) before it written to {args.output})")
+            raise type(damage)(f"{damage} ({done} complete frame(s) before it written to {args.output})")
     seconds = time.perf_counter() - t0
     first = source.first
     result = {"input": str(args.input), "output": str(args.output), "frames": done, "views": list(first.shape[:2]),

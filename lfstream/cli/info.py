@@ -150,6 +150,8 @@ def _describe_input(args: argparse.Namespace) -> dict:
     if not reads_lazily(args.input):
         return describe(load_from_args(args))
     video = open_video_lf(args.input, read_options(args), count_frames=True)
+    if video.damage is not None:  # (an .lfs cut short: decode and convert keep the frames before it)
+        raise type(video.damage)(f"{video.damage} ({video.count} complete frame(s) before it)")
     if not video.count:
         raise LFFormatError(f"{args.input}: contains no frames")
     fmt = "view-videos" if args.input.is_dir() else "video" if args.input.suffix.lower() in VIDEO_EXTS else "lfs"

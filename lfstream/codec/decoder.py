@@ -613,27 +613,32 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
 
 
 def lfs_frames(path: str | os.PathLike, max_frames: int | None = None, first_frame: int = 0
-               ) -> tuple[Iterator[np.ndarray], StreamHeader, int]:
+               ) -> tuple[Iterator[np.ndarray], StreamHeader, int, BitstreamError | None]:
     """An ``.lfs`` file as a light field for the readers (:func:`lfstream.io.open_video_lf`,
     :func:`lfstream.io.load_lf`): its frames decoded one at a time as :func:`decode` decodes
     them (the hint where the stream has one), its header (frame rate, views, view size),
-    and its frame count (the packets are counted, checksums and all, before any is
-    decoded); from frame ``first_frame`` (:func:`iter_decode`) for at most ``max_frames``,
-    the count the stream's whole. It
-    was decoded whole with flat disparity, for ``info``, which reads headers now: every
-    other command given an ``.lfs`` (``refocus``, ``stream``, ``view``) then saw the centre
-    view copied to every view, a light field without parallax.
+    its count of complete frames (the packets are counted, checksums and all, before any is
+    decoded) and the damage that ended the count, ``None`` where the stream ends cleanly
+    (a stream cut short, a recording interrupted: the frames before it are yielded, then
+    the error, as a damaged video gives its frames before the damage); from frame
+    ``first_frame`` (:func:`iter_decode`) for at most ``max_frames``. It was decoded whole with flat
+    disparity, for ``info``, which reads headers now: every other command given an ``.lfs``
+    (``refocus``, ``stream``, ``view``) then saw the centre view copied to every view, a
+    light field without parallax.
 
     Raises:
         LFFileError: the file cannot be read.
-        BitstreamError: damage, named with the file (the frames before it are yielded first).
+        BitstreamError: a damaged header or first packet (no frame to read); later damage,
+            named with the file, after the frames before it.
     """
     path = Path(path)
     with _errors_naming(path), open(path, "rb") as fh:
         header = read_header(fh)
         count, damage = count_packets(fh, header)
     if damage is not None:
-        raise BitstreamError(f"{path}: {damage}") from damage
+        damage = BitstreamError(f"{path}: {damage}")
+        if count == 0:
+            raise damage
     if count == 0:
         raise BitstreamError(f"{path}: stream holds no frames")
 
@@ -642,7 +647,7 @@ def lfs_frames(path: str | os.PathLike, max_frames: int | None = None, first_fra
             for f in iter_decode(fh, max_frames=max_frames, first_frame=first_frame):
                 yield f.lf
 
-    return frames(), header, count
+    return frames(), header, count, damage
 
 
 @contextmanager

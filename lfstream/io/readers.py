@@ -393,6 +393,9 @@ class VideoLF:
         path: the file (or the folder of view videos).
         present: ``(U, V)`` mask of the views that exist (a folder of view videos read with
             ``allow_missing``: the missing views are zero in every frame); ``None``: all.
+        damage: where the file is known to be damaged before a frame is read (an ``.lfs``,
+            whose packets are counted): the error the frames end with, after the ``count``
+            complete ones before it; ``None``: none known.
     """
 
     frames: Iterator[np.ndarray]
@@ -402,6 +405,7 @@ class VideoLF:
     size: tuple[int, int]
     path: Path
     present: np.ndarray | None = None
+    damage: Exception | None = None
 
 
 def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, count_frames: bool = False) -> VideoLF:
@@ -418,11 +422,12 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
         LFFormatError: not a readable video, or no grid known.
         LFShapeError, LFValueError: a mosaic that is not a multiple of the grid, a crop
             larger than the grid.
-        BitstreamError: a damaged ``.lfs`` (counted before the first frame is decoded).
+        BitstreamError: an ``.lfs`` damaged before its first complete frame (counted before
+            any is decoded; later damage ends the frames, :attr:`VideoLF.damage`).
     """
     opts = options or ReadOptions()
     path = Path(path)
-    present = None
+    present, damage = None, None
     if path.is_dir():
         lazy = _lazy_folder_kind(path)
         if lazy is None:
@@ -435,8 +440,8 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
         import importlib
 
         module, name = _LAYERED_READERS[path.suffix.lower()]
-        decoded, header, count = getattr(importlib.import_module(module), name)(path, max_frames=opts.max_frames,
-                                                                                first_frame=opts.first_frame)
+        decoded, header, count, damage = getattr(importlib.import_module(module), name)(
+            path, max_frames=opts.max_frames, first_frame=opts.first_frame)
         fps, views, size = header.fps, header.views, header.size
     else:
         info = video_info(path, count_frames=count_frames)
@@ -475,7 +480,7 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
         if n == 0 and opts.first_frame:  # a count the container did not record
             raise LFValueError(f"{path}: first_frame {opts.first_frame}: the video ends before it")
 
-    return VideoLF(frames(), fps, count, tuple(views), tuple(size), path, present)
+    return VideoLF(frames(), fps, count, tuple(views), tuple(size), path, present, damage)
 
 
 def _range_count(count: int | None, opts: ReadOptions, path: Path) -> int | None:

@@ -407,3 +407,29 @@ def test_decoding_from_a_later_frame_gives_that_frames_bytes(options, tmp_path, 
     err = capsys.readouterr().err
     assert "first_frame 9: it holds 7 frame(s)" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "late.mp4").exists()
+
+
+def test_an_lfs_cut_short_reads_as_its_frames_before_the_damage(tmp_path, capsys):
+    """A stream cut short (a recording interrupted) is read lazily up to the damage, as a
+    damaged video is: ``convert`` writes the complete frames before it (exit 2, one line
+    naming the frame), ``info`` names the damage and the complete frames; a stream damaged
+    before its first complete frame is refused before anything is decoded."""
+    from lfstream.errors import BitstreamError
+    from lfstream.io import open_video_lf
+
+    clip = synth_clip(4, 3, (32, 40), seed=1).lf
+    data = lfstream.encode(clip)
+    (tmp_path / "cut.lfs").write_bytes(data[:-100])
+    video = open_video_lf(tmp_path / "cut.lfs")
+    assert video.count == 3 and isinstance(video.damage, BitstreamError) and "frame 3" in str(video.damage)
+    capsys.readouterr()
+    assert main(["convert", str(tmp_path / "cut.lfs"), str(tmp_path / "cut.avi")]) == 2
+    err = capsys.readouterr().err
+    assert "frame 3" in err and "3 complete frame(s) before it written" in err and len(err.strip().splitlines()) == 1
+    np.testing.assert_array_equal(lfstream.read_lf(tmp_path / "cut.avi"), lfstream.decode(data)[:3])
+    assert main(["info", str(tmp_path / "cut.lfs")]) == 2
+    err = capsys.readouterr().err
+    assert "frame 3" in err and "3 complete frame(s) before it" in err
+    (tmp_path / "first.lfs").write_bytes(data[:60])
+    with pytest.raises(BitstreamError, match="first.lfs"):
+        open_video_lf(tmp_path / "first.lfs")
