@@ -7,6 +7,7 @@ A mosaic video stores each LF frame as its sub-aperture mosaic (views tiled row-
 
 from __future__ import annotations
 
+import itertools
 import os
 import re
 from collections.abc import Iterator, Sequence
@@ -84,20 +85,26 @@ def iter_video_frames(path: Path, max_frames: int | None = None, threads: int | 
             stream.codec_context.thread_count = int(threads)
         size = _parse_pair(SIZE_METADATA_PREFIX, _tags(container).get(GRID_METADATA_KEY))
         try:
-            for i, frame in enumerate(_decoded_from(container, stream, first_frame)):
-                if max_frames is not None and i >= max_frames:
-                    break
+            for frame in itertools.islice(_decoded_from(container, stream, first_frame, path), max_frames):
                 img = frame.to_ndarray(format="rgb24")
                 yield img[: size[0], : size[1]] if size is not None else img
         except av.error.FFmpegError as exc:  # type: ignore[attr-defined]
             raise LFFormatError(f"{path}: video decoding failed ({exc})") from exc
 
 
-def _decoded_from(container, stream, first_frame: int) -> Iterator:
+#: Packets past a frame's decode position whose timestamps can still come before it in
+#: display order (H.264 and HEVC reorder across at most 16 frames).
+REORDER_MARGIN = 32
+
+
+def _decoded_from(container, stream, first_frame: int, path: Path | None = None) -> Iterator:
     """The video stream's decoded frames (PyAV's) from frame ``first_frame`` on, in display
     order. An intra-only codec's packets are its frames, in order, each decodable alone: the
     first ``first_frame`` non-empty ones are read and dropped undecoded (an empty packet
-    repeats a frame in AVI and decodes to nothing; the last one flushes the decoder)."""
+    repeats a frame in AVI and decodes to nothing; the last one flushes the decoder). An
+    inter codec's (``path`` given) start at the last key frame at or before it
+    (:func:`_key_frame_before`), the frames between decoded and dropped; where the packets
+    give no timestamps, or the key frame is the first, every frame before it is decoded."""
     if first_frame <= 0:
         yield from container.decode(stream)
         return
@@ -109,9 +116,48 @@ def _decoded_from(container, stream, first_frame: int) -> Iterator:
                 continue
             yield from packet.decode()
         return
+    found = None if path is None else _key_frame_before(path, first_frame)
+    if found is not None:
+        key, target = found
+        container.seek(key, stream=stream, backward=True, any_frame=False)
+        frames = container.decode(stream)
+        head = next(frames, None)
+        if head is not None and head.pts is not None and head.pts <= target:
+            for frame in itertools.chain([head], frames):
+                if frame.pts is None or frame.pts >= target:
+                    yield frame
+            return
+        container.seek(0, stream=stream, backward=True, any_frame=True)  # not where it should be: from the start
+        stream.codec_context.flush_buffers()
     for i, frame in enumerate(container.decode(stream)):
         if i >= first_frame:
             yield frame
+
+
+def _key_frame_before(path: Path, first_frame: int) -> tuple[int, int] | None:
+    """``(key, target)``: the presentation timestamps of the last key frame at or before
+    frame ``first_frame`` (display order) and of that frame, read from the packets of the
+    file's first ``first_frame + REORDER_MARGIN`` frames (no frame decoded); ``None`` where
+    the packets carry no timestamps, the video ends before the frame, or the key frame is
+    the first frame (nothing to skip)."""
+    with _open_container(path) as probe:
+        stream = probe.streams.video[0]
+        stamps: list[tuple[int, bool]] = []
+        for packet in probe.demux(stream):
+            if packet.size == 0:
+                continue
+            if packet.pts is None:
+                return None
+            stamps.append((int(packet.pts), bool(packet.is_keyframe)))
+            if len(stamps) > first_frame + REORDER_MARGIN:
+                break
+    if len(stamps) <= first_frame:
+        return None
+    target = sorted(p for p, _ in stamps)[first_frame]
+    keys = [p for p, key in stamps if key and p <= target]
+    if not keys or max(keys) <= min(p for p, _ in stamps):
+        return None
+    return max(keys), target
 
 
 def _tags(container) -> dict[str, str]:

@@ -190,3 +190,59 @@ def test_the_same_frames_give_the_same_file_whatever_the_heap_holds(tmp_path):
         outs.append(out)
     for name in ("lossy.mp4", "lossless.mp4", "ffv1.mkv", "utvideo.avi", "lossy.webm"):
         assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
+
+
+def test_a_later_first_frame_of_an_inter_coded_video_starts_at_its_key_frame(tmp_path, monkeypatch):
+    """An H.264 video with a key frame every 5 frames and B-frames (display order differs
+    from decode order): from every first frame the frames are exactly the whole decode's;
+    from frame 7 on the reader seeks to the key frame at frame 5 and decodes 2 frames it
+    drops, not 7 (counted); before the second key frame it decodes from the start."""
+    import lfstream.io.video as video_mod
+
+    path = tmp_path / "gop.mp4"
+    with av.open(str(path), "w") as out:
+        stream = out.add_stream("libx264", rate=10)
+        stream.width, stream.height, stream.pix_fmt = 64, 48, "yuv420p"
+        stream.options = {"g": "5", "bf": "3", "crf": "30"}
+        for i in range(17):
+            img = np.full((48, 64, 3), 12 * i, np.uint8)
+            img[:, 3 * i:3 * i + 3] = 255
+            for packet in stream.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(packet)
+        for packet in stream.encode():
+            out.mux(packet)
+    whole = list(iter_video_frames(path))
+    assert len(whole) == 17
+    for first in range(17):
+        part = list(iter_video_frames(path, first_frame=first))
+        assert len(part) == 17 - first and all(np.array_equal(a, b) for a, b in zip(part, whole[first:])), first
+    key, target = video_mod._key_frame_before(path, 7)
+    assert key < target and video_mod._key_frame_before(path, 3) is None
+    decoded = []
+    real_open = video_mod._open_container
+
+    class Counting:  # the container, counting the frames its decoder gives
+        def __init__(self, container):
+            self.container = container
+
+        def __enter__(self):
+            self.container.__enter__()
+            return self
+
+        def __exit__(self, *exc):
+            return self.container.__exit__(*exc)
+
+        def __getattr__(self, name):
+            return getattr(self.container, name)
+
+        def decode(self, stream):
+            for frame in self.container.decode(stream):
+                decoded.append(frame.pts)
+                yield frame
+
+    monkeypatch.setattr(video_mod, "_open_container", lambda p: Counting(real_open(p)))
+    assert len(list(iter_video_frames(path, first_frame=7, max_frames=2))) == 2
+    assert 2 < len(decoded) <= 4  # frames 5 and 6 at most dropped, 7 and 8 kept (not frames 0-6)
+    decoded.clear()
+    assert len(list(iter_video_frames(path, first_frame=3, max_frames=2))) == 2
+    assert len(decoded) == 5
