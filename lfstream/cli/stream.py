@@ -44,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.errors import LFStreamError, LFValueError
+    from lfstream.errors import LFFormatError, LFStreamError, LFValueError
     from lfstream.io._fs import fresh_dir, prepare_output_dir, remove_if_made_empty
     from lfstream.stream import Pipeline, Source, file_source, render_builtin_clip, synthetic_source
     from lfstream.stream.report import stopped_summary
@@ -95,4 +95,8 @@ def run(args: argparse.Namespace) -> int:
     _pipeline.report(args, summary, out)
     if viewer is not None and not args.json:
         print(f"open {viewer.resolve().as_uri()} to click-to-focus the result")
+    if summary.get("input_error"):  # the frames before the damage streamed, their outputs written
+        where = f"; their outputs in {out}" if out is not None else ""
+        raise LFFormatError(f"{summary['input_error']} (the stream ended there: {summary['frames']} frame(s) "
+                            f"before it streamed{where})")
     return 130 if summary["interrupted"] else 0

@@ -147,7 +147,10 @@ class Pipeline:
         return channel, channel
 
     def run(self) -> dict:
-        """Runs the stream to its end (or a stop) and returns the summary.
+        """Runs the stream to its end (or a stop) and returns the summary. An input damaged
+        after its first frames (a video or ``.lfs`` cut short) ends the stream there: the
+        frames before it go through every stage, and the summary names the damage
+        (``input_error``).
 
         Raises:
             PipelineError: a stage failed (after every stage has stopped and the outputs
@@ -226,7 +229,7 @@ class Pipeline:
             # delta hints / gain maps whose reference frame was lost: the previous ones stood in
             receive["hint_fallbacks"] = decoder.decoder.hint_fallbacks
             receive["gain_fallbacks"] = decoder.decoder.gain_fallbacks
-        return build_summary(
+        summary = build_summary(
             wall_s=wall,
             warmup_s=t_start - t_warm,
             frames=self.stats["sink"].frames if self.sender is None else self.stats["encoder"].frames,
@@ -247,6 +250,9 @@ class Pipeline:
             interrupted=self.interrupted,
             outputs=sink.sink.files if sink is not None and sink.sink is not None else [],
         )
+        if ctl.input_error is not None:
+            summary["input_error"] = str(ctl.input_error)
+        return summary
 
     def status_line(self, elapsed: float) -> str:
         """One line: frames done (of the total, with an ETA, when known), frames/s, elapsed

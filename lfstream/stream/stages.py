@@ -48,6 +48,9 @@ class RunControl:
     def __init__(self) -> None:
         self.stop_event = threading.Event()
         self.error: PipelineError | None = None
+        # the input's damage after its first frames: the stream ends there, the frames before
+        # it go through every stage and the outputs are finalised, then the run reports it
+        self.input_error: LFStreamError | None = None
         self._lock = threading.Lock()
 
     def fail(self, stage: str, frame: int | None, exc: BaseException) -> None:
@@ -182,6 +185,11 @@ class ProducerStage(Stage):
                 if not self.control.put(self.q_out, SourceFrame(seq, lf)):
                     break
                 seq += 1
+        except LFStreamError as exc:
+            if seq == 0:  # nothing read: the input itself is refused
+                self.control.fail(self.name, seq, exc)
+            else:  # damaged part way (a video or .lfs cut short): the stream ends here
+                self.control.input_error = exc
         except Exception as exc:
             self.control.fail(self.name, seq, exc)
         finally:

@@ -832,3 +832,22 @@ def test_a_frame_range_of_a_video_through_the_commands(capsys, tmp_path):
     assert not (tmp_path / "late.avi").exists()
     code, _, err = run(capsys, "stream", "-o", tmp_path / "out", "--first-frame", "2")
     assert code == 2 and "--first-frame" in err and "--frames" in err and not (tmp_path / "out").exists()
+
+
+def test_a_stream_of_an_input_cut_short_ends_there_with_its_outputs(capsys, tmp_path):
+    """An input damaged after its first frames (an .lfs cut short) ends the stream there:
+    the frames before it go through every stage, the outputs and summary.json are written
+    (the summary names the damage, ``input_error``), then one line and exit 2; damage before
+    any frame is the stage's error as before."""
+    import lfstream
+
+    data = lfstream.encode(synth_clip(4, 3, (32, 40), seed=1).lf)
+    (tmp_path / "cut.lfs").write_bytes(data[:-100])
+    code, out, err = run(capsys, "stream", tmp_path / "cut.lfs", "-o", tmp_path / "out", "--json")
+    summary = json.loads(out)
+    assert code == 2 and summary["frames"] == 3 and "frame 3" in summary["input_error"]
+    assert "3 frame(s) before it streamed" in err and len(err.strip().splitlines()) == 1
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["frames"] == 3
+    from lfstream.io import ReadOptions, open_video_lf
+
+    assert open_video_lf(tmp_path / "out" / "plane_00.mp4", ReadOptions(grid=(1, 1))).count == 3
