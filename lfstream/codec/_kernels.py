@@ -22,9 +22,16 @@ _HOLE_TEST = np.float32(-1.0e38)
 # here: joint_upsample gave different maps from run to run). tests/codec checks the
 # kernels against plain-Python references and across thread counts.
 _ROW = dict(fastmath=True, cache=True, nogil=True)
+# Row helpers that allocate nothing run without numba's reference counting (``_nrt=False``):
+# with it, every array argument of a call that LLVM does not inline is counted up on entry
+# and down on each exit with atomic instructions, a dozen or more a row through the warp's
+# helpers, which were 16 % of a decode's CPU (perf on the 2-core Zen 5: NRT_incref and
+# NRT_decref the two hottest instructions); their callers hold the arrays meanwhile.
+_ROW_BORROWED = dict(_ROW, _nrt=False)
 # OpenCV's arithmetic reproduced: no fastmath (a fused multiply-add or a reordered sum would
 # round differently from OpenCV's separate float32 multiplies and adds)
 _EXACT = dict(cache=True, nogil=True)
+_EXACT_BORROWED = dict(_EXACT, _nrt=False)  # (see _ROW_BORROWED)
 
 
 # Fixed-point bilinear sampling: positions in 1/1024 pixel (OpenCV 5's remap interpolates
@@ -149,8 +156,8 @@ def _hole_scratch(w):  # pragma: no cover - compiled
     return np.zeros((w + 7) // 8 * 8, np.uint8)
 
 
-@numba.njit(**_ROW)
-def _fill_holes(disp_row, dview_row, mask):  # pragma: no cover - compiled
+@numba.njit(**_ROW_BORROWED)
+def _fill_holes(disp, dview, y, mask, words):  # pragma: no cover - compiled
     """Fills the holes of one splatted view row in place: a hole run takes the disparity of
     its nearest splatted neighbour on the background side (the smaller disparity), so the
     background is extended, not the occluder; a row nothing landed on falls back to the
@@ -167,17 +174,17 @@ def _fill_holes(disp_row, dview_row, mask):  # pragma: no cover - compiled
     that vectorises and scanned as uint64 words, so the scan passes eight splatted pixels per
     test: about 2.5 % of a view's pixels are holes, spread over most rows, and a test per
     pixel took 0.45 ms a 375 x 540 view, this 0.2 ms (a per-16-pixel minimum of the floats,
-    tried before, was slower than the test per pixel).
+    tried before, was slower than the test per pixel). ``words``: ``mask`` as uint64, made
+    once by the caller. Row ``y`` of the maps is indexed in place (see :func:`_row_accs`).
     """
-    w = disp_row.shape[0]
+    w = disp.shape[1]
     any_hole = np.uint8(0)
     for x in range(w):
-        hole = np.uint8(dview_row[x] <= _HOLE_TEST)
+        hole = np.uint8(dview[y, x] <= _HOLE_TEST)
         mask[x] = hole
         any_hole |= hole
     if any_hole == 0:
         return
-    words = mask.view(np.uint64)
     x = 0
     while x < w:
         if (x & 7) == 0 and words[x >> 3] == 0:
@@ -192,28 +199,28 @@ def _fill_holes(disp_row, dview_row, mask):  # pragma: no cover - compiled
         left, right = start - 1, x
         if left < 0 and right >= w:
             for xx in range(start, x):
-                dview_row[xx] = disp_row[xx]
+                dview[y, xx] = disp[y, xx]
             continue
         if left < 0:
             src = right
         elif right >= w:
             src = left
         else:
-            src = left if dview_row[left] <= dview_row[right] else right
+            src = left if dview[y, left] <= dview[y, right] else right
         for xx in range(start, x):
-            dview_row[xx] = dview_row[src]
+            dview[y, xx] = dview[y, src]
 
 
-@numba.njit(**_ROW)
-def _row_taps(d_row, cols, y, du, dv, h, idx, fxs, fys):  # pragma: no cover - compiled
+@numba.njit(**_ROW_BORROWED)
+def _row_taps(dmap, cols, y, du, dv, h, idx, fxs, fys):  # pragma: no cover - compiled
     """Flat index of the top-left bilinear tap in the padded centre view (:func:`pack_lanes`)
-    and the 1/1024-pixel fractions of one view row; pixel x samples at column ``cols[x] +
-    d_row[x] * dv`` (``cols``: x as float32; a float array, not the loop counter, keeps the
+    and the 1/1024-pixel fractions of view row ``y``; pixel x samples at column ``cols[x] +
+    dmap[y, x] * dv`` (``cols``: x as float32; a float array, not the loop counter, keeps the
     loop vectorised)."""
-    w = d_row.shape[0]
+    w = dmap.shape[1]
     fy = np.float32(y)
     for x in range(w):
-        d = d_row[x]
+        d = dmap[y, x]
         ix = _floor_int((cols[x] + d * dv) * np.float32(_FRAC) + np.float32(0.5), np.float32(_TAP_OFFSET))
         iy = _floor_int((fy + d * du) * np.float32(_FRAC) + np.float32(0.5), np.float32(_TAP_OFFSET))
         fxs[x] = ix & (_FRAC - 1)
@@ -224,16 +231,16 @@ def _row_taps(d_row, cols, y, du, dv, h, idx, fxs, fys):  # pragma: no cover - c
 
 
 @numba.njit(fastmath=True, cache=True, nogil=True, inline="always")
-def _gather_pair(packed, idx, offset, first, second):  # pragma: no cover - compiled
-    """``first[x] = packed[idx[x]]``, ``second[x] = packed[idx[x] + offset]``: a row's two taps,
-    loads alone (:func:`_row_accs`)."""
+def _gather_pair(packed, idx, offset, gathered, first, second):  # pragma: no cover - compiled
+    """``gathered[first, x] = packed[idx[x]]``, ``gathered[second, x] = packed[idx[x] +
+    offset]``: a row's two taps, loads alone (:func:`_row_accs`)."""
     for x in range(idx.shape[0]):
         i = np.uint32(idx[x])
-        first[x] = packed[i]
-        second[x] = packed[i + offset]
+        gathered[first, x] = packed[i]
+        gathered[second, x] = packed[i + offset]
 
 
-@numba.njit(**_ROW)
+@numba.njit(**_ROW_BORROWED)
 def _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs):  # pragma: no cover - compiled
     """Bilinear interpolation of the packed lanes for one view row: ``accs[x]`` (each lane
     then holds ``2**_SCALE_BITS * value``) from the taps at ``idx[x]``, the top-left one in
@@ -253,135 +260,138 @@ def _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs):  # pragma: n
     w = idx.shape[0]
     f = np.uint64(_FRAC)
     zero = np.uint64(0)
-    ta, tb, tc, td = gathered[0], gathered[1], gathered[2], gathered[3]
+    # the four tap rows indexed in place, not taken as row views (see _ROW_BORROWED)
+    g = gathered
     one = np.uint32(1)
     if taps == _TAPS_ROW:
-        _gather_pair(packed, idx, one, ta, tb)
+        _gather_pair(packed, idx, one, g, 0, 1)
         for x in range(w):
-            accs[x] = f * _lerp_lanes(ta[x], tb[x], np.uint64(fxs[x]))
+            accs[x] = f * _lerp_lanes(g[0, x], g[1, x], np.uint64(fxs[x]))
         return
     if taps == _TAPS_COLUMN:
-        _gather_pair(packed, idx, stride, ta, tc)
+        _gather_pair(packed, idx, stride, g, 0, 2)
         for x in range(w):
             fy = np.uint64(fys[x])
-            accs[x] = (f - fy) * _lerp_lanes(ta[x], ta[x], zero) + fy * _lerp_lanes(tc[x], tc[x], zero)
+            accs[x] = (f - fy) * _lerp_lanes(g[0, x], g[0, x], zero) + fy * _lerp_lanes(g[2, x], g[2, x], zero)
         return
     for x in range(w):
         i = np.uint32(idx[x])
-        ta[x] = packed[i]
-        tb[x] = packed[i + one]
-        tc[x] = packed[i + stride]
-        td[x] = packed[i + stride + one]
+        g[0, x] = packed[i]
+        g[1, x] = packed[i + one]
+        g[2, x] = packed[i + stride]
+        g[3, x] = packed[i + stride + one]
     for x in range(w):
         fx = np.uint64(fxs[x])
         fy = np.uint64(fys[x])
-        accs[x] = (f - fy) * _lerp_lanes(ta[x], tb[x], fx) + fy * _lerp_lanes(tc[x], td[x], fx)
+        accs[x] = (f - fy) * _lerp_lanes(g[0, x], g[1, x], fx) + fy * _lerp_lanes(g[2, x], g[3, x], fx)
 
 
-@numba.njit(**_ROW)
-def _row_sample3(packed, stride, idx, fxs, fys, taps, gathered, accs, dst):  # pragma: no cover - compiled
-    """Bilinear samples of one view row of three channels, rounded to uint8; ``gathered``
-    (4, W) and ``accs`` (W,) uint64 scratch (:func:`_row_accs`), whose lanes a second loop
-    unpacks (inside the sampling loop, as before, the unpacking stayed scalar too: a 375 x
-    540 view 0.53 -> 0.45 ms with four taps, one thread)."""
+@numba.njit(**_ROW_BORROWED)
+def _row_sample3(packed, stride, idx, fxs, fys, taps, gathered, accs, dst, y):  # pragma: no cover - compiled
+    """Bilinear samples of one view row of three channels, rounded to uint8 into row ``y``
+    of ``dst`` (H, W * 3); ``gathered`` (4, W) and ``accs`` (W,) uint64 scratch
+    (:func:`_row_accs`), whose lanes a second loop unpacks (inside the sampling loop, as
+    before, the unpacking stayed scalar too: a 375 x 540 view 0.53 -> 0.45 ms with four
+    taps, one thread)."""
     _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs)
     m = np.uint64(255)
     half = np.uint64(_HALF_LANES)
     for x in range(accs.shape[0]):
         acc = (accs[x] + half) >> np.uint64(_SCALE_BITS)
         k = np.uint32(3 * x)  # unsigned: no negative-index check in the loop
-        dst[k] = np.uint8(acc & m)
-        dst[k + np.uint32(1)] = np.uint8((acc >> np.uint64(_LANE)) & m)
-        dst[k + np.uint32(2)] = np.uint8((acc >> np.uint64(2 * _LANE)) & m)
+        dst[y, k] = np.uint8(acc & m)
+        dst[y, k + np.uint32(1)] = np.uint8((acc >> np.uint64(_LANE)) & m)
+        dst[y, k + np.uint32(2)] = np.uint8((acc >> np.uint64(2 * _LANE)) & m)
 
 
-@numba.njit(**_ROW)
-def _row_sample(packed, stride, idx, fxs, fys, taps, c, ch0, n_ch, gathered, accs, dst):  # pragma: no cover - compiled
-    """Bilinear samples of one view row (any channel layout), rounded to uint8; ``gathered``
-    and ``accs`` scratch (:func:`_row_accs`)."""
+@numba.njit(**_ROW_BORROWED)
+def _row_sample(packed, stride, idx, fxs, fys, taps, c, ch0, n_ch, gathered, accs, dst, y):  # pragma: no cover - compiled
+    """Bilinear samples of one view row (any channel layout), rounded to uint8 into row ``y``
+    of ``dst``; ``gathered`` and ``accs`` scratch (:func:`_row_accs`)."""
     _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs)
     m = np.uint64(255)
     half = np.uint64(_HALF_LANES)
     for x in range(accs.shape[0]):
         acc = (accs[x] + half) >> np.uint64(_SCALE_BITS)
         for j in range(n_ch):
-            dst[x * c + ch0 + j] = np.uint8((acc >> np.uint64(_LANE * j)) & m)
+            dst[y, x * c + ch0 + j] = np.uint8((acc >> np.uint64(_LANE * j)) & m)
 
 
-@numba.njit(**_ROW)
-def _row_gain_apply(vals, top, bottom, wa, dst):  # pragma: no cover - compiled
-    """dst[j] = vals[j] * (wa * top[j] + (1 - wa) * bottom[j]), rounded and saturated to
-    uint8: contiguous, so LLVM vectorises it (the same arithmetic inside the sampling loop,
-    whose gathers keep it scalar, cost a third of the warp)."""
+@numba.njit(**_ROW_BORROWED)
+def _row_gain_apply(vals, gcols, top, bottom, wa, dst, y):  # pragma: no cover - compiled
+    """dst[y, j] = vals[j] * (wa * gcols[top, j] + (1 - wa) * gcols[bottom, j]), rounded and
+    saturated to uint8: contiguous, so LLVM vectorises it (the same arithmetic inside the
+    sampling loop, whose gathers keep it scalar, cost a third of the warp)."""
     wb = np.float32(1.0) - wa
     half = np.float32(0.5)
     for j in range(vals.shape[0]):
-        dst[j] = min(np.int32(np.float32(vals[j]) * (top[j] * wa + bottom[j] * wb) + half), 255)
+        dst[y, j] = min(np.int32(np.float32(vals[j]) * (gcols[top, j] * wa + gcols[bottom, j] * wb) + half), 255)
 
 
-@numba.njit(**_ROW)
-def _row_sample_gain(packed, stride, idx, fxs, fys, taps, c, ch0, n_ch, top, bottom, wa, gathered, accs,
-                     vals, dst):  # pragma: no cover
-    """Bilinear samples of one view row times the gain ``wa * top + (1 - wa) * bottom``
-    (two gain rows, (W * n_ch,), that include the fixed-point scale), rounded and
-    saturated to uint8; ``gathered``, ``accs`` (:func:`_row_accs`) and ``vals`` (W * n_ch,)
-    int32 scratch."""
+@numba.njit(**_ROW_BORROWED)
+def _row_sample_gain(packed, stride, idx, fxs, fys, taps, c, ch0, n_ch, gcols, top, bottom, wa, gathered, accs,
+                     vals, dst, y):  # pragma: no cover
+    """Bilinear samples of one view row times the gain ``wa * gcols[top] + (1 - wa) *
+    gcols[bottom]`` (gain rows (W * n_ch,) that include the fixed-point scale), rounded and
+    saturated to uint8 into row ``y`` of ``dst``; ``gathered``, ``accs``
+    (:func:`_row_accs`) and ``vals`` (W * n_ch,) int32 scratch."""
     _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs)
     m = np.uint64(_LANE_MASK)
     for x in range(accs.shape[0]):
         acc = accs[x]
         for j in range(n_ch):
             vals[x * n_ch + j] = np.int32((acc >> np.uint64(_LANE * j)) & m)
-    _row_gain_store(vals, c, ch0, n_ch, top, bottom, wa, dst)
+    _row_gain_store(vals, c, ch0, n_ch, gcols, top, bottom, wa, dst, y)
 
 
-@numba.njit(**_ROW)
-def _row_gain_store(vals, c, ch0, n_ch, top, bottom, wa, dst):  # pragma: no cover - compiled
+@numba.njit(**_ROW_BORROWED)
+def _row_gain_store(vals, c, ch0, n_ch, gcols, top, bottom, wa, dst, y):  # pragma: no cover - compiled
     """:func:`_row_gain_apply` into channels ch0 .. ch0 + n_ch - 1 of a row of ``c``."""
     if n_ch == c:
-        _row_gain_apply(vals, top, bottom, wa, dst)
+        _row_gain_apply(vals, gcols, top, bottom, wa, dst, y)
         return
     wb = np.float32(1.0) - wa
     for x in range(vals.shape[0] // n_ch):
         for j in range(n_ch):
             k = x * n_ch + j
-            dst[x * c + ch0 + j] = min(np.int32(np.float32(vals[k]) * (top[k] * wa + bottom[k] * wb)
-                                                + np.float32(0.5)), 255)
+            dst[y, x * c + ch0 + j] = min(np.int32(np.float32(vals[k]) * (gcols[top, k] * wa + gcols[bottom, k] * wb)
+                                                   + np.float32(0.5)), 255)
 
 
-@numba.njit(**_ROW)
-def _row_centre(packed, start, c, ch0, n_ch, has_gains, top, bottom, wa, vals, dst):  # pragma: no cover
+@numba.njit(**_ROW_BORROWED)
+def _row_centre(packed, start, c, ch0, n_ch, has_gains, gcols, top, bottom, wa, vals, dst, y):  # pragma: no cover
     """One row of the centre view (displacement 0): every sample position is a pixel's own,
     whatever the disparity, so the bilinear samples are the pixels bit for bit (``2**13 *
     value`` in each lane) and are read straight from the packed row that starts at
     ``start``, with the gains applied as for any view: the same bytes as sampling, in a loop
     that vectorises (the sampling loop made the centre view cost as much as a row view's
     two taps: 0.7-1.2 ms a 375 x 540 view on one thread)."""
-    w = dst.shape[0] // c
+    w = dst.shape[1] // c
     m = np.uint64(255)
     if has_gains:
         for x in range(w):
             p = packed[start + x]
             for j in range(n_ch):
                 vals[x * n_ch + j] = np.int32((p >> np.uint64(_LANE * j)) & m) << _SCALE_BITS
-        _row_gain_store(vals, c, ch0, n_ch, top, bottom, wa, dst)
+        _row_gain_store(vals, c, ch0, n_ch, gcols, top, bottom, wa, dst, y)
         return
     if n_ch == 3 and c == 3:
         for x in range(w):
             p = packed[start + x]
             k = np.uint32(3 * x)  # unsigned: no negative-index check in the loop
-            dst[k] = np.uint8(p & m)
-            dst[k + np.uint32(1)] = np.uint8((p >> np.uint64(_LANE)) & m)
-            dst[k + np.uint32(2)] = np.uint8((p >> np.uint64(2 * _LANE)) & m)
+            dst[y, k] = np.uint8(p & m)
+            dst[y, k + np.uint32(1)] = np.uint8((p >> np.uint64(_LANE)) & m)
+            dst[y, k + np.uint32(2)] = np.uint8((p >> np.uint64(2 * _LANE)) & m)
         return
     for x in range(w):
         p = packed[start + x]
         for j in range(n_ch):
-            dst[x * c + ch0 + j] = np.uint8((p >> np.uint64(_LANE * j)) & m)
+            dst[y, x * c + ch0 + j] = np.uint8((p >> np.uint64(_LANE * j)) & m)
 
 
-@numba.njit(**_ROW)
-def _row_sample3_gain(packed, stride, idx, fxs, fys, taps, top, bottom, wa, gathered, accs, vals, dst):  # pragma: no cover
+@numba.njit(**_ROW_BORROWED)
+def _row_sample3_gain(packed, stride, idx, fxs, fys, taps, gcols, top, bottom, wa, gathered, accs, vals, dst,
+                      y):  # pragma: no cover
     """:func:`_row_sample_gain` for three channels: the lanes unpacked into ``vals`` by
     unsigned index, then the gain pass over the contiguous row. Both unrolled samplers earn
     their place in the full kernel: with the general ones alone the warp took 20-35 % longer
@@ -394,7 +404,7 @@ def _row_sample3_gain(packed, stride, idx, fxs, fys, taps, top, bottom, wa, gath
         vals[k] = np.int32(acc & m)
         vals[k + np.uint32(1)] = np.int32((acc >> np.uint64(_LANE)) & m)
         vals[k + np.uint32(2)] = np.int32((acc >> np.uint64(2 * _LANE)) & m)
-    _row_gain_apply(vals, top, bottom, wa, dst)
+    _row_gain_apply(vals, gcols, top, bottom, wa, dst, y)
 
 
 @numba.njit(**_PARALLEL)
@@ -439,6 +449,7 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, splat,
         cols = np.arange(w).astype(np.float32)
         targets = np.empty(w, np.int32)
         holes = _hole_scratch(w)
+        words = holes.view(np.uint64)
         idx = np.empty(w, np.int32)
         fxs = np.empty(w, np.int32)
         fys = np.empty(w, np.int32)
@@ -451,15 +462,18 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, splat,
         for i in range(starts[task], starts[task + 1]):
             k = order[i]
             _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, k // n_v, k % n_v, splat, reach, gains,
-                       g_rows, g_row_w, g_cols, g_col_w, dview, cols, targets, holes, counts, idx, fxs, fys, gcols,
-                       gathered, accs, vals, out)
+                       g_rows, g_row_w, g_cols, g_col_w, dview, cols, targets, holes, words, counts, idx, fxs, fys,
+                       gcols, gathered, accs, vals, out)
 
 
 @numba.njit(**_ROW)
 def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, splat, reach, gains, g_rows, g_row_w,
-               g_cols, g_col_w, dview, cols, targets, holes, counts, idx, fxs, fys, gcols, gathered, accs,
+               g_cols, g_col_w, dview, cols, targets, holes, words, counts, idx, fxs, fys, gcols, gathered, accs,
                vals, out):  # pragma: no cover
-    """One view of :func:`warp_all_views`, in the caller's scratch buffers."""
+    """One view of :func:`warp_all_views`, in the caller's scratch buffers. The view's rows
+    are passed to the row helpers as (array, row index), never as row views: each view
+    counts the array's memory record up and down with atomic instructions, 10-16 % of a
+    decode's CPU when every row made several (:func:`_row_accs`)."""
     h, w = disp.shape
     has_gains = gains.shape[0] > 0
     per_view = view_disp.shape[0] > 0
@@ -485,32 +499,34 @@ def _warp_view(packed, channels, ch0, n_ch, disp, view_disp, offsets, u, v, spla
                 for j in range(n_ch):
                     cc = ch0 + j if cg > 1 else 0
                     gcols[r, x * n_ch + j] = (gains[u, v, r, ca, cc] * wx + gains[u, v, r, cb, cc] * (1 - wx)) * scale
+    dst = out[u, v]
     if du == 0 and dv == 0:
         for y in range(h):
-            _row_centre(packed, (y + 1) * (w + 2) + 1, channels, ch0, n_ch, has_gains, gcols[g_rows[y, 0]],
-                        gcols[g_rows[y, 1]], g_row_w[y], vals, out[u, v, y])
+            _row_centre(packed, (y + 1) * (w + 2) + 1, channels, ch0, n_ch, has_gains, gcols, g_rows[y, 0],
+                        g_rows[y, 1], g_row_w[y], vals, dst, y)
         return
+    own = view_disp[u, v] if per_view else disp
     for y in range(h):
         if per_view:
-            _row_taps(view_disp[u, v, y], cols, y, du, dv, h, idx, fxs, fys)
+            _row_taps(own, cols, y, du, dv, h, idx, fxs, fys)
         elif splatted and rows[y]:
-            _fill_holes(disp[y], dview[y], holes)  # the splat's scratch row, in place
-            _row_taps(dview[y], cols, y, du, dv, h, idx, fxs, fys)
+            _fill_holes(disp, dview, y, holes, words)  # the splat's scratch row, in place
+            _row_taps(dview, cols, y, du, dv, h, idx, fxs, fys)
         else:
-            _row_taps(disp[y], cols, y, du, dv, h, idx, fxs, fys)
+            _row_taps(disp, cols, y, du, dv, h, idx, fxs, fys)
         if has_gains and channels == 3:
-            _row_sample3_gain(packed, stride, idx, fxs, fys, taps, gcols[g_rows[y, 0]], gcols[g_rows[y, 1]],
-                              g_row_w[y], gathered, accs, vals, out[u, v, y])
+            _row_sample3_gain(packed, stride, idx, fxs, fys, taps, gcols, g_rows[y, 0], g_rows[y, 1], g_row_w[y],
+                              gathered, accs, vals, dst, y)
         elif has_gains:
-            _row_sample_gain(packed, stride, idx, fxs, fys, taps, channels, ch0, n_ch, gcols[g_rows[y, 0]],
-                             gcols[g_rows[y, 1]], g_row_w[y], gathered, accs, vals, out[u, v, y])
+            _row_sample_gain(packed, stride, idx, fxs, fys, taps, channels, ch0, n_ch, gcols, g_rows[y, 0],
+                             g_rows[y, 1], g_row_w[y], gathered, accs, vals, dst, y)
         elif channels == 3:
-            _row_sample3(packed, stride, idx, fxs, fys, taps, gathered, accs, out[u, v, y])
+            _row_sample3(packed, stride, idx, fxs, fys, taps, gathered, accs, dst, y)
         else:
-            _row_sample(packed, stride, idx, fxs, fys, taps, channels, ch0, n_ch, gathered, accs, out[u, v, y])
+            _row_sample(packed, stride, idx, fxs, fys, taps, channels, ch0, n_ch, gathered, accs, dst, y)
 
 
-@numba.njit(**_EXACT)
+@numba.njit(**_EXACT_BORROWED)
 def _add_view_correction(dst, c0, cy, cx, oy, ox):  # pragma: no cover - compiled
     """``dst += (c0 + oy * cy) + ox * cx`` along one row, in float32 and in numpy's order
     (no fused multiply-add: exact, whatever the caller's fastmath)."""
@@ -552,18 +568,19 @@ def splat_all_views(disp, offsets, splat, reach, corr, out):  # pragma: no cover
         cols = np.arange(w).astype(np.float32)
         targets = np.empty(w, np.int32)
         holes = _hole_scratch(w)
+        words = holes.view(np.uint64)
         counts = np.empty(h + 1, np.int32)
         _splat_view(disp, cols, du, dv, dview, targets, rows, reach[u, v], counts)
         for y in range(h):
             if rows[y]:
-                _fill_holes(disp[y], dview[y], holes)
+                _fill_holes(disp, dview, y, holes, words)
             else:
                 dview[y] = disp[y]
             if correct:
                 _add_view_correction(dview[y], corr[0, y], corr[1, y], corr[2, y], du, dv)
 
 
-@numba.njit(**_EXACT)
+@numba.njit(**_EXACT_BORROWED)
 def _gain_map_row(gain, r, cols, col_w, n_ch, dst):  # pragma: no cover - compiled
     """Row ``r`` of one view's gain map ``(gh, gw, Cg)`` resized along x, as OpenCV's
     INTER_LINEAR horizontal pass computes it (``S[sx] * a0 + S[sx + 1] * a1`` in float32), for
@@ -577,7 +594,7 @@ def _gain_map_row(gain, r, cols, col_w, n_ch, dst):  # pragma: no cover - compil
             dst[x * n_ch + j] = gain[r, a, cc] * w0 + gain[r, b, cc] * w1
 
 
-@numba.njit(**_EXACT)
+@numba.njit(**_EXACT_BORROWED)
 def _gain_apply_row(src_row, top, bottom, b0, b1, dst_row):  # pragma: no cover - compiled
     """``dst = saturate(rint(src * (top * b0 + bottom * b1)))``: OpenCV's vertical resize
     pass and its ``multiply`` of uint8 by float32 into uint8 (float32 product, round half to
@@ -698,7 +715,7 @@ def fold_bounds(disp):  # pragma: no cover - compiled
     return rx.max(), ry.max()  # maxima of the rows' maxima: the same float32 values
 
 
-@numba.njit(**_ROW)
+@numba.njit(**_ROW_BORROWED)
 def _block_mean_row(grey, i, scale, acc, out_row):  # pragma: no cover - compiled
     """Block row ``i`` of :func:`block_means` for one image; ``acc`` (W,) int32 scratch.
     The block's rows are added column by column first (contiguous: the loop vectorises),
@@ -782,9 +799,10 @@ def _sweep_span(r0, r1, centre, ax, ay, ox, lo, hi, acc):  # pragma: no cover - 
 # _sweep_span with a zero weight; any other order moved hint maps by 2e-7 and changed the
 # stream bytes of three of the seven shared scenes. tests/codec/test_hint.py compares.
 _NO_REASSOC = dict(fastmath={"nnan", "ninf", "nsz", "arcp", "contract", "afn"}, cache=True, nogil=True)
+_NO_REASSOC_BORROWED = dict(_NO_REASSOC, _nrt=False)  # (see _ROW_BORROWED)
 
 
-@numba.njit(**_NO_REASSOC)
+@numba.njit(**_NO_REASSOC_BORROWED)
 def _sweep_span_row(r0, centre, ax, ox, lo, hi, acc):  # pragma: no cover - compiled
     """:func:`_sweep_span` where the vertical weight is 0 (one row's two taps)."""
     a0 = r0[lo + ox: hi + ox]
@@ -795,7 +813,7 @@ def _sweep_span_row(r0, centre, ax, ox, lo, hi, acc):  # pragma: no cover - comp
         out[i] += abs(a0[i] + ax * (a1[i] - a0[i]) - c[i])
 
 
-@numba.njit(**_NO_REASSOC)
+@numba.njit(**_NO_REASSOC_BORROWED)
 def _sweep_span_col(r0, r1, centre, ay, ox, lo, hi, acc):  # pragma: no cover - compiled
     """:func:`_sweep_span` where the horizontal weight is 0 (one column's two taps)."""
     a0 = r0[lo + ox: hi + ox]
@@ -806,7 +824,7 @@ def _sweep_span_col(r0, r1, centre, ay, ox, lo, hi, acc):  # pragma: no cover - 
         out[i] += abs((a0[i] - c[i]) + ay * (b0[i] - a0[i]))
 
 
-@numba.njit(**_ROW)
+@numba.njit(**_ROW_BORROWED)
 def _sweep_row(images, offsets, s, y, acc):  # pragma: no cover - compiled
     n_j = offsets.shape[0]
     h, w = images.shape[1], images.shape[2]
@@ -863,7 +881,7 @@ def sweep_cost(images, offsets, shifts, cost):  # pragma: no cover - compiled
         _sweep_row(images, offsets, shifts[job // h], job % h, cost[job // h, job % h])
 
 
-@numba.njit(**_ROW)
+@numba.njit(**_ROW_BORROWED)
 def _winner_row(cost, shifts, y, best, c_best, out_row):  # pragma: no cover - compiled
     """One row of :func:`winner_subpixel`; ``best`` (w,) int32 and ``c_best`` (w,) float32
     scratch. The candidates are the outer loop, so each pass reads one contiguous cost
@@ -927,7 +945,7 @@ def _jbu_taps(n_out, n_small, scale):  # pragma: no cover - compiled
     return first, weights
 
 
-@numba.njit(**_ROW)
+@numba.njit(**_ROW_BORROWED)
 def _jbu_row(small, gsmall, guide_row, lut, y0, wy, x0, wx, out_row):  # pragma: no cover - compiled
     hs, ws = small.shape
     for x in range(out_row.shape[0]):
@@ -987,7 +1005,7 @@ _CB_G = int(round(0.344 * (1 << _YCC_BITS)))
 _CB_B = int(round(1.773 * (1 << _YCC_BITS)))
 
 
-@numba.njit(**_ROW)
+@numba.njit(**_ROW_BORROWED)
 def _i420_residual_row(dst_row, flat, y, height, width, offset, store, vcb, vcr, hcb, hcr):  # pragma: no cover
     """One row of ``dst = rgb(planes)`` (``store``) or ``dst += rgb(planes) - offset``,
     saturated to 8 bits. Chroma is up-sampled bilinearly with the centre-aligned phase of
