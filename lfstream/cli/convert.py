@@ -35,8 +35,8 @@ def run(args: argparse.Namespace) -> int:
     if args.input.resolve() == args.output.resolve():
         raise LFValueError(f"{args.output}: the input itself; convert writes a new file")
     ext = args.output.suffix.lower()
-    # a .npy is sized by the frames counted first; a .npz is compressed whole at the end;
-    # anything else is written frame by frame as the frames are read (one in memory)
+    # written frame by frame as the frames are read (one in memory): a .npy sized by the
+    # frames counted first, a .npz deflated from its frames when closed
     source = read_input(args, count_frames=ext == ".npy")
     if source.present is not None and not source.present.all():
         missing = int((~source.present).sum())
@@ -45,10 +45,10 @@ def run(args: argparse.Namespace) -> int:
     fps = args.fps or source.fps or 30.0
     t0 = time.perf_counter()
     done, interrupted = 0, False
-    # a .npz is compressed whole; a float light field read whole goes to a .npy as it is
-    # (frame by frame, the writers take 8 bits)
-    keeps_dtype = ext == ".npy" and source.whole is not None and source.whole.dtype != np.uint8
-    if ext == ".npz" or keeps_dtype:
+    # a float light field read whole goes to a .npy or .npz as it is (frame by frame, the
+    # writers take 8 bits)
+    keeps_dtype = ext in (".npy", ".npz") and source.whole is not None and source.whole.dtype != np.uint8
+    if keeps_dtype:
         lf = source.whole if source.whole is not None else np.stack(list(source.frames))
         write_lf(args.output, lf, fps=fps, overwrite=args.overwrite)
         done = len(lf)

@@ -37,9 +37,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lfstream.codec.bitstream import count_packets, read_header
-    from lfstream.codec.decoder import frames_array, iter_decode, video_array
+    from lfstream.codec.decoder import iter_decode
     from lfstream.errors import BitstreamError, LFFileError
-    from lfstream.io import FrameWriter, write_lf, write_pfm
+    from lfstream.io import FrameWriter, write_pfm
     from lfstream.io._fs import check_new_file, prepare_output_dir
     from lfstream.lightfield import check_first_frame
 
@@ -48,39 +48,33 @@ def run(args: argparse.Namespace) -> int:
         # a new or empty folder (or --overwrite): maps of an earlier decode are not replaced
         # unasked, and a file there is one line, not a traceback
         prepare_output_dir(args.disparity_out, args.overwrite)
-    # a video, a folder or a .npy is written frame by frame as the frames are decoded (one
-    # frame in memory; a video at the stream's frame rate; a .npy sized by the packets
-    # counted first); a .npz takes them together at the end (its members are compressed
-    # whole), decoded into one array sized by the packets counted first (not stacked after)
-    by_frame = args.output.suffix.lower() != ".npz"
-    frames, count, writer, error, write_s, expected, video = [], 0, None, None, 0.0, None, None
+    # every output is written frame by frame as the frames are decoded (one frame in memory;
+    # a video at the stream's frame rate; a .npy sized by the packets counted first; a .npz
+    # deflated from its frames when closed: it held the whole video)
+    count, writer, error, write_s, expected = 0, None, None, 0.0, None
     t0 = time.perf_counter()
     try:
         with open(args.input, "rb") as fh:
             header = read_header(fh)
             fps = header.fps
-            if args.output.suffix.lower() in (".npy", ".npz") or args.first_frame:
+            if args.output.suffix.lower() == ".npy" or args.first_frame:
                 available = count_packets(fh, header)[0]  # the frames up to any damage
                 if args.first_frame and available:  # (none: the decode names the damage)
                     check_first_frame(args.first_frame, available, args.input)
                 expected = max(0, available - args.first_frame)
                 if args.max_frames is not None:
                     expected = min(expected, args.max_frames)
-                video = None if by_frame else video_array(header, expected)
             fh.seek(0)
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
-                                 device=args.device, batch=args.batch, deblock=not args.no_deblock, out=video,
+                                 device=args.device, batch=args.batch, deblock=not args.no_deblock,
                                  first_frame=args.first_frame, max_frames=args.max_frames):
                 with interrupt_after():  # a frame's outputs are written whole
-                    if by_frame:
-                        t_write = time.perf_counter()
-                        if writer is None:
-                            writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite)
-                        writer.write(f.lf)
-                        write_s += time.perf_counter() - t_write
-                    else:
-                        frames.append(f.lf)
+                    t_write = time.perf_counter()
+                    if writer is None:
+                        writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite)
+                    writer.write(f.lf)
+                    write_s += time.perf_counter() - t_write
                     count += 1
                     if args.disparity_out is not None:
                         write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
@@ -102,8 +96,6 @@ def run(args: argparse.Namespace) -> int:
     # a damaged stream still gives a valid output of every frame before the damage
     if writer is not None:
         writer.close(partial=error is not None)
-    elif frames:
-        write_lf(args.output, frames_array(frames, video), overwrite=args.overwrite)
     if error is not None:
         done = (f"{count} complete frame(s) before it written to {args.output}" if count
                 else "no complete frame, nothing written")

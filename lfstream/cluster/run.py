@@ -116,9 +116,9 @@ def _run_local(jobs: Iterable[_Job], on_result: Callable[[int, GroupResult | Bas
 class _Outputs:
     """Each input's results, in job order (all of an input's jobs come together), into its
     output: an encode's packets (small) written with the header when its last group is in;
-    a decode's frames written group by group as they come (:class:`lfstream.io.FrameWriter`;
-    a ``.npz`` whole, its members compressed whole), so a decoded video is never all in
-    memory. An input whose reading or a job failed leaves no output."""
+    a decode's frames written group by group as they come (:class:`lfstream.io.FrameWriter`,
+    a ``.npz`` too: deflated from its frames when closed), so a decoded video is never all
+    in memory. An input whose reading or a job failed leaves no output."""
 
     def __init__(self, mode: str, files: list[FileResult], plans: dict[int, dict], overwrite: bool) -> None:
         self.mode, self.files, self.plans, self.overwrite = mode, files, plans, overwrite
@@ -144,9 +144,6 @@ class _Outputs:
         plan = self.plans[file]
         self.frames += len(result.frames)
         self.nbytes += int(result.frames.nbytes)
-        if plan["target"].suffix.lower() == ".npz":
-            self.parts.append(result.frames)
-            return
         try:
             if self.writer is None:
                 from lfstream.io import FrameWriter
@@ -184,11 +181,8 @@ class _Outputs:
             elif self.writer is not None:
                 self.writer.close()
                 res.bytes = plan["target"].stat().st_size if plan["target"].is_file() else self.nbytes
-            else:
-                from lfstream.io import write_lf
-
-                write_lf(plan["target"], np.concatenate(self.parts), fps=plan["fps"], overwrite=self.overwrite)
-                res.bytes = plan["target"].stat().st_size
+            else:  # a decode that gave no frame
+                raise LFStreamError("no frame decoded")
             res.frames, res.status = self.frames, "ok"
         except LFStreamError as exc:
             self.abort()

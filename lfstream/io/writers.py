@@ -134,11 +134,10 @@ class NpyWriter:
 class FrameWriter:
     """Writes an LF video frame by frame to what :func:`write_lf` writes whole, holding one
     frame at a time: a mosaic video (the file appears when closed), a ``.npy`` of ``count``
-    frames (memory-mapped, renamed into place when all are written) or a folder of
-    ``frame_NNNNNN/`` view folders. ``.npz`` is not written this way (its members are
-    compressed whole). A context manager: the output is finalised when the block ends
-    normally, or on Ctrl-C with the frames so far where the format allows (a video, a
-    folder), and discarded on any other exception.
+    frames (memory-mapped, renamed into place when all are written), a ``.npz``
+    (:class:`NpzWriter`: the frames deflated into the archive when closed) or a folder of
+    ``frame_NNNNNN/`` view folders. A context manager: the output is finalised when the block
+    ends normally, or on Ctrl-C with the frames so far, and discarded on any other exception.
 
     Args:
         path: the output; an existing file or non-empty folder is an error unless
@@ -151,10 +150,11 @@ class FrameWriter:
                  overwrite: bool = False, image_ext: str = ".png") -> None:
         self.path = Path(path)
         self._ext = self.path.suffix.lower()
-        if self._ext == ".npz" or self._ext in IMAGE_EXTS or self._ext in NOT_LF_EXTS:
+        if self._ext in IMAGE_EXTS or self._ext in NOT_LF_EXTS:
             raise LFValueError(f"{self.path}: cannot write a light field frame by frame as {self._ext}; use .npy, "
-                               "a video or a folder")
-        self._npy = NpyWriter(self.path, count) if self._ext == ".npy" else None
+                               ".npz, a video or a folder")
+        self._array = NpyWriter(self.path, count) if self._ext == ".npy" else (
+            NpzWriter(self.path) if self._ext == ".npz" else None)
         if self.path.exists() and (self.path.is_file() or any(self.path.iterdir())):
             check_new_file(self.path, overwrite)
         self._fps, self._lossless, self._image_ext = fps, lossless, image_ext
@@ -172,8 +172,8 @@ class FrameWriter:
             if self._video is None:
                 self._video = VideoWriter(self.path, self._fps, self._lossless, metadata=grid_metadata(lf.shape[:2]))
             self._video.write(to_mosaic(lf))
-        elif self._npy is not None:
-            self._npy.write(lf)
+        elif self._array is not None:
+            self._array.write(lf)
         else:
             if not self.path.exists():
                 self.path.mkdir(parents=True)
@@ -187,16 +187,16 @@ class FrameWriter:
         written so far (no frame at all: nothing is kept)."""
         if self._video is not None:
             self._video.close()
-        if self._npy is not None:
-            self._npy.close(partial)
+        if self._array is not None:
+            self._array.close(partial)
 
     def abort(self) -> None:
         """Discards what was written (a folder keeps its complete frames; one this writer
         made and wrote nothing to is removed)."""
         if self._video is not None:
             self._video.abort()
-        if self._npy is not None:
-            self._npy.abort()
+        if self._array is not None:
+            self._array.abort()
         if self._made_folder and self.path.is_dir() and not any(self.path.iterdir()):
             self.path.rmdir()
 
@@ -210,6 +210,83 @@ class FrameWriter:
             self.close(partial=True)
         else:
             self.abort()
+
+
+#: Bytes of the frames file an :class:`NpzWriter` deflates into its archive at a time.
+NPZ_COPY_CHUNK = 16 << 20
+
+
+class NpzWriter:
+    """A ``.npz`` of frames written one at a time, the archive :func:`write_lf` writes (the
+    member ``lf.npy`` deflated, as ``np.savez_compressed`` writes it): the frames are appended
+    to a temporary file of raw frames beside the output, and deflated into the archive's
+    member when closed, :data:`NPZ_COPY_CHUNK` bytes at a time, the header sized by the
+    frames written; then renamed into place. Memory holds a frame and a chunk, not the
+    video (``lfstream decode -o x.npz`` held every decoded frame); the disk holds the raw
+    frames meanwhile (what a ``.npy`` of them would take). The caller checks that ``path``
+    may be written (:func:`lfstream.io._fs.check_new_file`)."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        self._raw = temp_sibling(self.path, "frames")
+        self._fh = None
+        self._frame: tuple[tuple[int, ...], np.dtype] | None = None
+        self.frames = 0
+
+    def write(self, frame: np.ndarray) -> None:
+        """Appends the next frame (every frame the first's shape and dtype)."""
+        frame = np.ascontiguousarray(frame)
+        if self._fh is None:
+            try:
+                self._fh = open(self._raw, "wb")
+            except OSError as exc:
+                raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+            self._frame = (frame.shape, frame.dtype)
+        if (frame.shape, frame.dtype) != self._frame:
+            raise LFValueError(f"{self.path}: frame {self.frames} of shape {frame.shape} ({frame.dtype}) unlike the "
+                               f"first's {self._frame[0]} ({self._frame[1]})")
+        try:
+            self._fh.write(memoryview(frame).cast("B"))
+        except OSError as exc:
+            raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+        self.frames += 1
+
+    def close(self, partial: bool = False) -> None:
+        """Deflates the frames written into the archive and renames it into place (none
+        written: nothing is kept). ``partial``: as :meth:`NpyWriter.close`, for the callers
+        (every frame written is kept either way)."""
+        if self._fh is None:
+            return
+        fh, self._fh = self._fh, None
+        fh.close()
+        if not self.frames:
+            self._raw.unlink(missing_ok=True)
+            return
+        import zipfile
+
+        shape, dtype = self._frame
+        header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False,
+                  "shape": (self.frames, *shape)}
+        tmp = temp_sibling(self.path)
+        try:
+            with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, allowZip64=True) as archive, \
+                    archive.open("lf.npy", "w", force_zip64=True) as member, open(self._raw, "rb") as raw:
+                np.lib.format.write_array_header_1_0(member, header)
+                while chunk := raw.read(NPZ_COPY_CHUNK):
+                    member.write(chunk)
+            os.replace(tmp, self.path)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+        finally:
+            self._raw.unlink(missing_ok=True)
+
+    def abort(self) -> None:
+        """Discards what was written."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+        self._raw.unlink(missing_ok=True)
 
 
 def _truncate_npy(path: Path, frames: int) -> None:
@@ -243,4 +320,4 @@ def _npy_bytes(arr: np.ndarray) -> bytes:
     return bio.getvalue()
 
 
-__all__ = ["write_lf", "FrameWriter", "NpyWriter"]
+__all__ = ["write_lf", "FrameWriter", "NpyWriter", "NpzWriter"]

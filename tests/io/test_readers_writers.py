@@ -221,7 +221,7 @@ def test_frame_writer_writes_what_write_lf_writes(tmp_path, rng, name):
 
 def test_frame_writer_keeps_nothing_torn(tmp_path, rng):
     """A .npy short of its frame count, an error mid-way or a refused format leave no file;
-    Ctrl-C (or ``close(partial=True)``: a damaged stream) keeps a video or .npy of the
+    Ctrl-C (or ``close(partial=True)``: a damaged stream) keeps a video, .npy or .npz of the
     frames written so far."""
     from lfstream.io import FrameWriter
 
@@ -250,9 +250,27 @@ def test_frame_writer_keeps_nothing_torn(tmp_path, rng):
     w.write(video[0])
     w.close(partial=True)
     np.testing.assert_array_equal(np.load(tmp_path / "damaged.npy", mmap_mode="r"), video[:1])
-    with pytest.raises(LFStreamError, match="npz"):
-        FrameWriter(tmp_path / "x.npz", 3)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.npy", "stopped.mp4", "stopped.npy"]
+    with pytest.raises(LFStreamError, match="gif"):
+        FrameWriter(tmp_path / "x.gif", 3)
+    # a .npz: the archive write_lf writes, byte for byte, holding a frame at a time; Ctrl-C
+    # keeps the frames so far, an error nothing (nor its raw frames)
+    with FrameWriter(tmp_path / "whole.npz") as w:
+        for frame in video:
+            w.write(frame)
+    write_lf(tmp_path / "ref.npz", video)
+    assert (tmp_path / "whole.npz").read_bytes() == (tmp_path / "ref.npz").read_bytes()
+    with pytest.raises(KeyboardInterrupt):
+        with FrameWriter(tmp_path / "stopped.npz") as w:
+            w.write(video[0])
+            raise KeyboardInterrupt
+    np.testing.assert_array_equal(load_lf(tmp_path / "stopped.npz").lf, video[:1])
+    with pytest.raises(RuntimeError):
+        with FrameWriter(tmp_path / "err.npz") as w:
+            w.write(video[0])
+            raise RuntimeError("boom")
+    (tmp_path / "whole.npz").unlink()
+    (tmp_path / "ref.npz").unlink()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged.npy", "stopped.mp4", "stopped.npy", "stopped.npz"]
     with pytest.raises(LFFileError, match="already exists"):
         FrameWriter(tmp_path / "stopped.mp4")
 
