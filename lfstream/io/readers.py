@@ -300,7 +300,9 @@ def _read_array_file(path: Path, opts: ReadOptions = ReadOptions()) -> LoadedLF:
         if disparity is not None and disparity.ndim == 5 and len(disparity) == len(lf):
             disparity = _frame_range(disparity, opts, path)
         lf = _frame_range(lf, opts, path)
-    if isinstance(lf, np.memmap):  # the range, copied out of the mapped file (or the still, whole)
+    if isinstance(lf, np.memmap) or (isinstance(lf.base, np.ndarray) and lf.size < lf.base.size):
+        # the range copied out of the mapped file (a .npy; a still whole), or out of the
+        # whole array (a .npz's member is read whole), which is then freed
         lf = np.array(lf)
     return LoadedLF(lf=lf, format=fmt, path=path, disparity=disparity)
 
