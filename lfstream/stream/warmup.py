@@ -10,6 +10,12 @@ a tiny light field; the summary reports the time as ``warmup_s``, apart from ``w
 
 from __future__ import annotations
 
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 
 from lfstream.stream.config import StreamConfig
@@ -39,6 +45,75 @@ def warmup_lf() -> np.ndarray:
     return lf
 
 
+#: The modules whose numba kernels a stream compiles: their source stamps key the marker
+#: that says they were compiled here before (:func:`_compiled_marker`).
+KERNEL_MODULES = ("codec/_kernels.py", "codec/_entropy.py", "refocus/_kernels.py", "_kernels.py")
+
+
+def _compiled_marker() -> Path | None:
+    """The file whose existence says a stream's kernels were compiled on this machine for
+    these sources, numba and Python (numba caches each kernel on disk; this only decides
+    whether compiling is likely); ``None`` where lfstream keeps no cache folder."""
+    from lfstream.stream.sources import cache_dir
+
+    folder = cache_dir()
+    if folder is None:
+        return None
+    import numba
+
+    root = Path(__file__).resolve().parents[1]
+    key = hashlib.sha256(f"{numba.__version__} {sys.version} {root}".encode())
+    for name in KERNEL_MODULES:
+        try:
+            st = (root / name).stat()
+        except OSError:
+            return None
+        key.update(f" {name} {st.st_mtime_ns} {st.st_size}".encode())
+    return folder / f"kernels-{key.hexdigest()[:16]}.compiled"
+
+
+def compile_beside(warp: bool, focal: bool) -> subprocess.Popen | None:
+    """Starts a child process that compiles the decoder's warp and the focal stack
+    (:func:`compile_warp_and_focal_stack`: the two slowest kernels to compile, about 10 and
+    3.5 s on the 2-core EPYC) while this process compiles the encoder's and the metrics'
+    (about 10 s): numba caches what either compiles on disk, and each then loads the
+    other's. Only where the kernels look uncompiled (no :func:`_compiled_marker`): a warm
+    start would pay the child's imports for nothing. ``None`` where it is not started (or
+    cannot be: the warm-up then compiles everything itself, as before)."""
+    marker = _compiled_marker()
+    if not (warp or focal) or marker is None or marker.exists():
+        return None
+    root = str(Path(__file__).resolve().parents[2])  # the folder lfstream is imported from
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    code = f"from lfstream.stream.warmup import compile_warp_and_focal_stack; compile_warp_and_focal_stack({warp}, {focal})"
+    try:
+        return subprocess.Popen([sys.executable, "-c", code], env=env, stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+def compile_warp_and_focal_stack(warp: bool = True, focal: bool = True) -> None:
+    """Runs the decoder's warp (occlusion and gains: every branch of the fused kernel) and
+    the focal stack on the warm-up light field, with the argument types the stream's
+    decoder and refocus stage give them, so that numba compiles and caches those kernels
+    (what :func:`compile_beside`'s child does; tests/stream checks the stream then compiles
+    neither again)."""
+    from lfstream.codec.warp import warp_views
+    from lfstream.refocus import focal_stack
+
+    lf = warmup_lf()
+    u, v, h, w, _ = lf.shape
+    views = lf
+    if warp:
+        centre = np.ascontiguousarray(lf[u // 2, v // 2])
+        disparity = np.linspace(-1.0, 1.0, h * w, dtype=np.float32).reshape(h, w)
+        gains = np.full((u, v, 2, 3, 3), 1.05, np.float32)
+        views = warp_views(centre, disparity, (u, v), occlusion=True, gains=gains)
+    if focal:
+        focal_stack(views, slopes=[-0.5, 0.0, 0.5])
+
+
 def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     """Runs the encoder, decoder, focal stack and metrics of ``config`` once on a tiny light
     field (:func:`warmup_lf`), so that their kernels are loaded, and the decoder's networks
@@ -49,23 +124,51 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     tests/stream checks both kinds of source). ``decode=False`` (a stream that ends at the
     transport) stops after the encoder; a stream that starts at the transport still encodes
     the tiny frame, to have a packet to decode."""
-    u, v, h, w, _ = WARMUP_SHAPE
     if any(kind in config.save for kind in ("mp4", "mp4-lossless", "sweep", "lf")):
         import av  # noqa: F401 - the sink's video library: ~0.1 s to import, paid here once
-    from lfstream.codec.decoder import Decoder
+    # where the kernels were not compiled yet (a first run: about 25 s on the 2-core EPYC,
+    # one core), the warp and the focal stack compile in a child process meanwhile
+    child = compile_beside(warp=decode and config.device == "cpu",
+                           focal=decode and config.refocus in ("auto", "sas"))
+    try:
+        _warm(config, decode, child)
+    finally:
+        if child is not None and child.poll() is None:  # Ctrl-C, or an error here
+            child.kill()
+            child.wait()
+    marker = _compiled_marker()
+    if marker is not None and not marker.exists():
+        try:
+            marker.touch()
+        except OSError:
+            pass
 
+
+def _warm(config: StreamConfig, decode: bool, child: subprocess.Popen | None) -> None:
+    """:func:`warm_kernels`' work; with ``child`` (:func:`compile_beside`) the metrics first,
+    then its end awaited before the warp and the focal stack run here (then loaded from
+    its cache, not compiled again)."""
+    from lfstream.codec.decoder import Decoder
+    from lfstream.metrics import mpsnr, mssim
+
+    u, v, h, w, _ = WARMUP_SHAPE
     lf = warmup_lf()
     encoder = config.encoder()
     packet = encoder.encode_frame(lf, 0, 0)
     if not decode:
         return
+    if child is not None:
+        if config.metrics:  # the same argument types as against the decoded views below
+            mpsnr(lf, lf.copy())
+            if config.mssim_every:
+                mssim(lf, lf.copy())
+        child.wait()
     header = encoder.header((u, v), (h, w), config.fps)
     # on the stream's device, so that a CUDA stream starts its context and its warp kernels
     # (Triton) here, not in the first timed frame (a frame of another size may still need
     # its own compile: Triton specialises on sizes)
     decoded = Decoder(header, depth="hint" if header.has_hint else "flat", hance="off",
                       device=config.device).decode_packet(packet)
-    from lfstream.metrics import mpsnr, mssim
     from lfstream.refocus import focal_stack
 
     if config.refocus in ("auto", "sas"):
@@ -84,4 +187,4 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
         networks.decode_packet(packet)
 
 
-__all__ = ["WARMUP_SHAPE", "warmup_lf", "warm_kernels"]
+__all__ = ["WARMUP_SHAPE", "KERNEL_MODULES", "warmup_lf", "warm_kernels", "compile_beside", "compile_warp_and_focal_stack"]

@@ -602,3 +602,41 @@ def test_the_refocus_stage_focuses_a_grid_stored_off_the_convention_as_its_own_o
     truth = focal_stack(clip, slopes=out.slopes)
     assert float(np.mean(psnr(truth, out.stack))) > 35.0
     assert float(np.mean(psnr(truth, focal_stack(np.ascontiguousarray(lf), slopes=out.slopes)))) < 34.0
+
+
+def test_the_child_compiles_the_warp_and_focal_stack_the_stream_calls(monkeypatch, tmp_path):
+    """On a first run the warp and the focal stack compile in a child process beside the
+    warm-up (:func:`lfstream.stream.warmup.compile_beside`): its calls must have the numba
+    types the stream's warm-up then gives those kernels, or the warm-up compiles them again
+    (recorded as in the test above). The child starts only where the marker of compiled
+    kernels is missing, exits cleanly, and the warm-up then leaves the marker."""
+    import importlib
+
+    import numba
+
+    import lfstream.stream.warmup as warmup
+
+    calls: list[tuple[str, tuple]] = []
+    for name, attr in (("lfstream.codec._kernels", "warp_all_views"), ("lfstream.refocus._kernels", "shift_sum_separable")):
+        module = importlib.import_module(name)
+        fn = getattr(module, attr)
+
+        def spy(*args, _fn=fn, _name=attr):
+            calls.append((_name, tuple(numba.typeof(a) for a in args)))
+            return _fn(*args)
+        monkeypatch.setattr(module, attr, spy)
+    warmup.compile_warp_and_focal_stack()
+    child = set(calls)
+    calls.clear()
+    monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path))
+    monkeypatch.setattr(warmup, "compile_beside", lambda warp, focal: None)  # the types only, here
+    warmup.warm_kernels(StreamConfig(refocus="sas", mssim_every=1, save=()))
+    assert {name for name, _ in child} == {"warp_all_views", "shift_sum_separable"}
+    assert calls and set(calls) <= child, sorted(set(calls) - child)
+    monkeypatch.undo()
+    monkeypatch.setenv("LFSTREAM_CACHE", str(tmp_path / "fresh"))
+    assert warmup.compile_beside(False, False) is None  # nothing to compile beside
+    started = warmup.compile_beside(True, True)
+    assert started is not None and started.wait(timeout=300) == 0
+    warmup.warm_kernels(StreamConfig(save=()))
+    assert warmup._compiled_marker().exists() and warmup.compile_beside(True, True) is None
