@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from numba.core import cgutils
+from numba.core.cpu import CPUTargetOptions
 from numba.extending import intrinsic
 
 _PARALLEL = dict(parallel=True, fastmath=True, cache=True, nogil=True)
@@ -29,11 +29,14 @@ _ROW = dict(fastmath=True, cache=True, nogil=True)
 # and down on each exit with atomic instructions, a dozen or more a row through the warp's
 # helpers, which were 16 % of a decode's CPU (perf on the 2-core Zen 5: NRT_incref and
 # NRT_decref the two hottest instructions); their callers hold the arrays meanwhile.
-_ROW_BORROWED = dict(_ROW, _nrt=False)
+# ``_nrt`` is an option numba's CPU target knows but does not document: where a numba
+# without it would refuse the kernels, they count as before.
+_BORROW = {"_nrt": False} if hasattr(CPUTargetOptions, "_nrt") else {}
+_ROW_BORROWED = dict(_ROW, **_BORROW)
 # OpenCV's arithmetic reproduced: no fastmath (a fused multiply-add or a reordered sum would
 # round differently from OpenCV's separate float32 multiplies and adds)
 _EXACT = dict(cache=True, nogil=True)
-_EXACT_BORROWED = dict(_EXACT, _nrt=False)  # (see _ROW_BORROWED)
+_EXACT_BORROWED = dict(_EXACT, **_BORROW)  # (see _ROW_BORROWED)
 
 
 # Fixed-point bilinear sampling: positions in 1/1024 pixel (OpenCV 5's remap interpolates
@@ -801,7 +804,7 @@ def _sweep_span(r0, r1, centre, ax, ay, ox, lo, hi, acc):  # pragma: no cover - 
 # _sweep_span with a zero weight; any other order moved hint maps by 2e-7 and changed the
 # stream bytes of three of the seven shared scenes. tests/codec/test_hint.py compares.
 _NO_REASSOC = dict(fastmath={"nnan", "ninf", "nsz", "arcp", "contract", "afn"}, cache=True, nogil=True)
-_NO_REASSOC_BORROWED = dict(_NO_REASSOC, _nrt=False)  # (see _ROW_BORROWED)
+_NO_REASSOC_BORROWED = dict(_NO_REASSOC, **_BORROW)  # (see _ROW_BORROWED)
 
 
 @numba.njit(**_NO_REASSOC_BORROWED)
@@ -1116,8 +1119,8 @@ def _prefetch(typingctx, arr, index):  # pragma: no cover - compiled
         ary = context.make_array(signature.args[0])(context, builder, args[0])
         i8p = ir.PointerType(ir.IntType(8))
         i32 = ir.IntType(32)
-        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]),
-                                            "llvm.prefetch.p0")
+        # the name mangled for the pointer type by llvmlite (typed or opaque pointers)
+        fn = builder.module.declare_intrinsic("llvm.prefetch", [i8p], ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]))
         address = builder.bitcast(builder.gep(ary.data, [args[1]]), i8p)
         builder.call(fn, [address, ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
         return context.get_dummy_value()
