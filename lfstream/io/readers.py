@@ -752,6 +752,7 @@ def read_lf(
     flip_v: bool = False,
     return_mask: bool = False,
     max_frames: int | None = None,
+    first_frame: int = 0,
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Reads a light field; see :class:`ReadOptions` for the options and :func:`load_lf`.
 
@@ -762,7 +763,7 @@ def read_lf(
         Without it, a folder with missing views raises :class:`LFMissingViewsError`.
     """
     opts = ReadOptions(angular=angular, crop=crop, grid=grid, flip_u=flip_u, flip_v=flip_v,
-                       allow_missing=return_mask, max_frames=max_frames)
+                       allow_missing=return_mask, max_frames=max_frames, first_frame=first_frame)
     loaded = load_lf(path, opts)
     if not return_mask:
         return loaded.lf

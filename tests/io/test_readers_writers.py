@@ -472,6 +472,7 @@ def test_a_frame_range_reads_the_frames_a_slice_of_the_whole_gives(tmp_path, rng
     with pytest.raises(LFValueError, match="first_frame 6") as info:
         load_lf(path, ReadOptions(first_frame=6))
     assert path.name in str(info.value)
+    np.testing.assert_array_equal(read_lf(path, first_frame=3, max_frames=2), video[3:5])
 
 
 def test_frames_skipped_in_an_intra_only_video_are_not_decoded():
