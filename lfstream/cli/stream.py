@@ -87,7 +87,12 @@ def run(args: argparse.Namespace) -> int:
                         stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
                         present=source.present, prepare=source.prepare)
         with _pipeline.single_threaded_opencv():
-            summary = pipe.run()
+            try:
+                summary = pipe.run()
+            except LFStreamError:
+                if out is not None:  # a stage failed before writing anything: no empty folder left
+                    remove_if_made_empty(out, created)
+                raise
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)
         summary = stopped_summary("tcp" if args.to else args.transport)

@@ -851,3 +851,15 @@ def test_a_stream_of_an_input_cut_short_ends_there_with_its_outputs(capsys, tmp_
     from lfstream.io import ReadOptions, open_video_lf
 
     assert open_video_lf(tmp_path / "out" / "plane_00.mp4", ReadOptions(grid=(1, 1))).count == 3
+
+
+def test_a_stream_failing_before_any_output_leaves_no_folder_it_made(capsys, tmp_path):
+    """A stage that fails before anything is written (Depth-Net asked of a stream without a
+    hint) is one line and exit 2, and the output folder this run made is removed; one the
+    user made stays."""
+    code, _, err = run(capsys, "stream", "--no-depth-hint", "--depth", "net", "--frames", "2", "-o", tmp_path / "made")
+    assert code == 2 and "stage decoder failed" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "made").exists()
+    (tmp_path / "mine").mkdir()
+    code, _, _ = run(capsys, "stream", "--no-depth-hint", "--depth", "net", "--frames", "2", "-o", tmp_path / "mine")
+    assert code == 2 and (tmp_path / "mine").is_dir()
