@@ -72,6 +72,11 @@ def _compiled_marker() -> Path | None:
     return folder / f"kernels-{key.hexdigest()[:16]}.compiled"
 
 
+#: Seconds the warm-up waits for :func:`compile_beside`'s child (its compile takes about 15 s
+#: on the 2-core EPYC) before it stops it and compiles the rest itself.
+CHILD_COMPILE_TIMEOUT_S = 300
+
+
 def compile_beside(warp: bool, focal: bool) -> subprocess.Popen | None:
     """Starts a child process that compiles the decoder's warp and the focal stack
     (:func:`compile_warp_and_focal_stack`: the two slowest kernels to compile, about 10 and
@@ -162,7 +167,11 @@ def _warm(config: StreamConfig, decode: bool, child: subprocess.Popen | None) ->
             mpsnr(lf, lf.copy())
             if config.mssim_every:
                 mssim(lf, lf.copy())
-        child.wait()
+        try:
+            child.wait(timeout=CHILD_COMPILE_TIMEOUT_S)
+        except subprocess.TimeoutExpired:  # never a hang: this process compiles what it needs itself
+            child.kill()
+            child.wait()
     header = encoder.header((u, v), (h, w), config.fps)
     # on the stream's device, so that a CUDA stream starts its context and its warp kernels
     # (Triton) here, not in the first timed frame (a frame of another size may still need
