@@ -212,6 +212,14 @@ def check_first_frame(first_frame: object, count: int | None = None, source: obj
         raise LFValueError(f"{where}first_frame {first_frame}: it holds {count} frame(s), 0..{count - 1}")
 
 
+def frames_in_range(count: int, first_frame: int, max_frames: int | None, source: object = None) -> int:
+    """How many of a video's ``count`` frames the range from ``first_frame`` of at most
+    ``max_frames`` holds (``first_frame`` checked against ``count``: :func:`check_first_frame`)."""
+    check_first_frame(first_frame, count, source)
+    left = count - first_frame
+    return left if max_frames is None else min(left, max_frames)
+
+
 def crop_views(lf: ArrayT, k: int) -> ArrayT:
     """Keeps the central ``k x k`` views, so the centre view stays the centre view.
 
@@ -498,6 +506,7 @@ __all__ = [
     "centre_view",
     "check_crop",
     "check_first_frame",
+    "frames_in_range",
     "crop_views",
     "downsample_angular",
     "to_sensor",

@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from lfstream.errors import BitstreamError, LFFileError
     from lfstream.io import FrameWriter, write_pfm
     from lfstream.io._fs import check_new_file, prepare_output_dir
-    from lfstream.lightfield import check_first_frame
+    from lfstream.lightfield import frames_in_range
 
     check_new_file(args.output, args.overwrite)
     if args.disparity_out is not None:
@@ -58,12 +58,8 @@ def run(args: argparse.Namespace) -> int:
             header = read_header(fh)
             fps = header.fps
             if args.output.suffix.lower() == ".npy" or args.first_frame:
-                available = count_packets(fh, header)[0]  # the frames up to any damage
-                if args.first_frame and available:  # (none: the decode names the damage)
-                    check_first_frame(args.first_frame, available, args.input)
-                expected = max(0, available - args.first_frame)
-                if args.max_frames is not None:
-                    expected = min(expected, args.max_frames)
+                available = count_packets(fh, header)[0]  # the frames up to any damage (none: the decode names it)
+                expected = frames_in_range(available, args.first_frame, args.max_frames, args.input) if available else 0
             fh.seek(0)
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,

@@ -79,20 +79,15 @@ def run(args: argparse.Namespace) -> int:
                                             residual=args.residual, residual_mode=args.residual_mode,
                                             hance_map=args.hance_map, transport=args.transport,
                                             fps=source.fps or 30.0)
-        except LFStreamError:
-            if out is not None:  # an input or options refused before anything ran: nothing left behind
-                remove_if_made_empty(out, created)
-            raise
-        pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
-                        stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
-                        present=source.present, prepare=source.prepare)
-        with _pipeline.single_threaded_opencv():
-            try:
+            pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
+                            stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
+                            present=source.present, prepare=source.prepare)
+            with _pipeline.single_threaded_opencv():
                 summary = pipe.run()
-            except LFStreamError:
-                if out is not None:  # a stage failed before writing anything: no empty folder left
-                    remove_if_made_empty(out, created)
-                raise
+        except LFStreamError:
+            if out is not None:  # an input or options refused, or a stage failed, before anything was
+                remove_if_made_empty(out, created)  # written: no empty folder left behind
+            raise
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)
         summary = stopped_summary("tcp" if args.to else args.transport)

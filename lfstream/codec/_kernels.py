@@ -1132,6 +1132,18 @@ def _prefetch(typingctx, arr, index):  # pragma: no cover - compiled
 _GAIN_PREFETCH_ROWS = 2
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _gain_sample_at(ys, xs, d_samples, i, j, oy, ox, h, w, c):  # pragma: no cover - compiled
+    """Where :func:`gain_samples` reads sample ``(i, j)`` of a view displaced by ``(oy, ox)``
+    per unit disparity: the flat index of its first channel in the ``(h, w, c)`` view
+    (unsigned: numba's wrap-around test on each signed index cost most of the kernel)."""
+    zero = np.float32(0.0)
+    dd = d_samples[i, j]
+    sy = np.uint64(min(max(np.rint(ys[i] - dd * oy), zero), np.float32(h - 1)))
+    sx = np.uint64(min(max(np.rint(xs[j] - dd * ox), zero), np.float32(w - 1)))
+    return (sy * np.uint64(w) + sx) * np.uint64(c)
+
+
 # Not fastmath: the sample positions must round exactly as numpy's float32 expression
 # ``rint(y - d * off)`` does (no fused multiply-add), so the gains are the same to the bit.
 @numba.njit(parallel=True, cache=True, nogil=True)
@@ -1150,17 +1162,14 @@ def gain_samples(lf, ys, xs, d_samples, offsets, scale, out):  # pragma: no cove
     """
     n_u, n_v, h, w, c = lf.shape
     n_y = ys.shape[0]
-    hi_y = np.float32(h - 1)
-    hi_x = np.float32(w - 1)
-    zero = np.float32(0.0)
     n_x = xs.shape[0]
-    uw, uc = np.uint64(w), np.uint64(c)
+    uc = np.uint64(c)
     for k in numba.prange(n_u * n_v):
         a, b = k // n_v, k % n_v
         oy = offsets[a, b, 0]
         ox = offsets[a, b, 1]
-        # flat rows and unsigned indices: numba's wrap-around test on each of the three
-        # signed indices of view[sy, sx, ch] cost most of the kernel (the same samples)
+        # flat rows and unsigned indices (_gain_sample_at): numba's wrap-around test on each
+        # of the three signed indices of view[sy, sx, ch] cost most of the kernel
         view = lf[a, b].reshape(h * w * c)
         # the samples are a few per cache line of rows far apart, in a frame the encoder has
         # mostly not read yet (36 of 49 views): each row's lines are requested two sample
@@ -1170,19 +1179,12 @@ def gain_samples(lf, ys, xs, d_samples, offsets, scale, out):  # pragma: no cove
             ahead = i + _GAIN_PREFETCH_ROWS
             if ahead < n_y:
                 for j in range(n_x):
-                    dd = d_samples[ahead, j]
-                    sy = np.uint64(min(max(np.rint(ys[ahead] - dd * oy), zero), hi_y))
-                    sx = np.uint64(min(max(np.rint(xs[j] - dd * ox), zero), hi_x))
-                    _prefetch(view, (sy * uw + sx) * uc)
+                    _prefetch(view, _gain_sample_at(ys, xs, d_samples, ahead, j, oy, ox, h, w, c))
             if i < 0:
                 continue
-            d_row = d_samples[i]
             out_row = out[k * n_y + i].reshape(n_x * c)
             for j in range(n_x):
-                dd = d_row[j]
-                sy = np.uint64(min(max(np.rint(ys[i] - dd * oy), zero), hi_y))
-                sx = np.uint64(min(max(np.rint(xs[j] - dd * ox), zero), hi_x))
-                src = (sy * uw + sx) * uc
+                src = _gain_sample_at(ys, xs, d_samples, i, j, oy, ox, h, w, c)
                 dst = np.uint64(j) * uc
                 for ch in range(c):
                     out_row[dst + np.uint64(ch)] = np.float32(view[src + np.uint64(ch)]) * scale

@@ -30,7 +30,7 @@ from lfstream.codec.residual import VIEW_MODES, apply_residual, decode_residual,
 from lfstream.codec.shading import GainDecoder, GainReferenceError
 from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.errors import BitstreamError, LFFileError, LFValueError
-from lfstream.lightfield import check_first_frame
+from lfstream.lightfield import check_first_frame, frames_in_range
 
 DEPTH_MODES = ("auto", "hint", "flat", "net")
 HANCE_MODES = ("auto", "on", "off")
@@ -540,9 +540,8 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
         count = count_packets(buf, header, limits)[0]
     except BitstreamError:  # a damaged header: the decode below names it
         count = None
-    if count:
-        check_first_frame(first_frame, count, "stream")
-    out = None if count is None else video_array(header, max(0, count - first_frame), max_frames)
+    out = None if count is None else video_array(
+        header, frames_in_range(count, first_frame, max_frames, "stream") if count else 0)
     buf.seek(0)
     frames: list[np.ndarray] = []
     try:
@@ -562,14 +561,12 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
 VIDEO_ARRAY_MEMORY_SHARE = 0.5
 
 
-def video_array(header: StreamHeader, count: int, max_frames: int | None = None) -> np.ndarray | None:
-    """The ``(T, U, V, H, W, 3)`` array for the ``count`` complete packets of a stream with
-    ``header`` (:func:`lfstream.codec.bitstream.count_packets`; at most ``max_frames``), or
+def video_array(header: StreamHeader, count: int) -> np.ndarray | None:
+    """The ``(T, U, V, H, W, 3)`` array for ``count`` frames of a stream with ``header`` (its
+    complete packets, :func:`lfstream.codec.bitstream.count_packets`, or a range of them), or
     ``None`` where there are none or they would take more than
     :data:`VIDEO_ARRAY_MEMORY_SHARE` of the machine's memory: a stream cannot make the
     decoder reserve memory its frames could not fill."""
-    if max_frames is not None:
-        count = min(count, max(0, int(max_frames)))
     u, v = header.views
     h, w = header.size
     frame_bytes = u * v * h * w * 3
@@ -600,10 +597,8 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
     check_first_frame(first_frame)
     with _errors_naming(path), open(path, "rb") as fh:
         header = read_header(fh)
-        count = count_packets(fh, header)[0]
-        if count:  # (none: the decode below names the damage)
-            check_first_frame(first_frame, count, path)
-        out = video_array(header, max(0, count - first_frame), max_frames)
+        count = count_packets(fh, header)[0]  # (none: the decode below names the damage)
+        out = video_array(header, frames_in_range(count, first_frame, max_frames, path) if count else 0)
         fh.seek(0)
         frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device,
                                             out=out, first_frame=first_frame)]

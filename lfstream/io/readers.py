@@ -33,7 +33,15 @@ import numpy as np
 from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError, LFValueError
 from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image
 from lfstream.io.video import VIDEO_EXTS, collect_frames, iter_video_frames, video_info
-from lfstream.lightfield import MAX_VIEWS_PER_AXIS, check_crop, check_first_frame, check_lf, crop_views, from_mosaic
+from lfstream.lightfield import (
+    MAX_VIEWS_PER_AXIS,
+    check_crop,
+    check_first_frame,
+    check_lf,
+    crop_views,
+    frames_in_range,
+    from_mosaic,
+)
 
 _RE_RC = re.compile(r"^(\d+)_(\d+)$")
 _RE_HCI = re.compile(r"^input_Cam(\d{3})$")
@@ -307,8 +315,9 @@ def _read_array_file(path: Path, opts: ReadOptions = ReadOptions()) -> LoadedLF:
     return LoadedLF(lf=lf, format=fmt, path=path, disparity=disparity)
 
 
-def _frame_range(frames: np.ndarray, opts: ReadOptions, path: Path) -> np.ndarray:
-    """The frames ``opts`` asks for (``first_frame``, ``max_frames``) of a ``(T, ...)`` array."""
+def _frame_range(frames, opts: ReadOptions, path: Path):
+    """The frames ``opts`` asks for (``first_frame``, ``max_frames``) of a ``(T, ...)`` array
+    (or a list)."""
     _range_count(len(frames), opts, path)
     stop = None if opts.max_frames is None else opts.first_frame + opts.max_frames
     return frames[opts.first_frame:stop]
@@ -492,11 +501,7 @@ def _range_count(count: int | None, opts: ReadOptions, path: Path) -> int | None
     Raises:
         LFValueError: the first frame asked for is past the video's end.
     """
-    if not count:
-        return count
-    check_first_frame(opts.first_frame, count, path)
-    left = count - opts.first_frame
-    return min(left, opts.max_frames) if opts.max_frames else left
+    return frames_in_range(count, opts.first_frame, opts.max_frames, path) if count else count
 
 
 #: Decoder threads of each view's video in a folder of view videos: one decoder a view, all
@@ -565,9 +570,7 @@ def _frame_folders(folder: Path, opts: ReadOptions, count_frames: bool = False):
         LFShapeError: a frame whose views, size or missing views differ from the first's.
     """
     everything = _frame_entries(folder)
-    _range_count(len(everything), opts, folder)  # a first frame past the end: refused before any is read
-    stop = None if opts.max_frames is None else opts.first_frame + opts.max_frames
-    entries = everything[opts.first_frame:stop]
+    entries = _frame_range(everything, opts, folder)  # a first frame past the end: refused before any is read
     inner = ReadOptions(angular=opts.angular, grid=opts.grid, allow_missing=opts.allow_missing)
     first = load_lf(entries[0], inner)
 
