@@ -882,8 +882,13 @@ def sweep_cost(images, offsets, shifts, cost):  # pragma: no cover - compiled
     """
     n_d = shifts.shape[0]
     h = images.shape[1]
+    # row-major jobs: a thread's consecutive jobs are every candidate of one row, which read
+    # the same few rows of each view from its cache (candidate-major, each candidate streamed
+    # all views again: 11-14 % slower, the same costs)
     for job in numba.prange(n_d * h):
-        _sweep_row(images, offsets, shifts[job // h], job % h, cost[job // h, job % h])
+        y = job // n_d
+        k = job % n_d
+        _sweep_row(images, offsets, shifts[k], y, cost[k, y])
 
 
 @numba.njit(**_ROW_BORROWED)

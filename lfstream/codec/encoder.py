@@ -25,7 +25,7 @@ from lfstream.codec.hint import HintOptions, HintTracker
 from lfstream.codec.intra import AV1_MIN_VIEW, CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.shading import GainTracker, measure_gains, shading_present
-from lfstream.codec.watchdog import in_background
+from lfstream.codec.watchdog import beside, completed
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.io._fs import atomic_open
 from lfstream.lightfield import centre_view, check_finite, check_lf, check_unit_range, to_uint8
@@ -244,21 +244,23 @@ class Encoder:
                                f"{int((~present).sum())} are missing; use the prediction mode, which reconstructs them")
         frame = to_uint8(np.asarray(lf))
         centre = centre_view(frame)
-        hint = b""
+        hint_job = None
         if self.keys_views:  # the centre view is the views' key frame: coded with them (add_residual)
-            image = b""
+            centre_job = completed(b"")
             if self.depth_hint:
-                hint = self._hints.encode(frame, seq, present)
+                hint_job = self._hints.start_encode(frame, seq, present)
         elif self.depth_hint:
             # the centre view's coding (and the post-filter choice, ~3 ms on key frames)
             # does not depend on the hint: overlapped with it on a worker thread (measured on
             # lytro_bikes, 2 cores: a single-frame encode 24.8 -> 20.2 ms); same bytes
-            centre_job = in_background(lambda: self._code_centre(centre))
-            hint = self._hints.encode(frame, seq, present)
-            image = centre_job.result()
+            centre_job = beside(lambda: self._code_centre(centre))
+            hint_job = self._hints.start_encode(frame, seq, present)
         else:
-            image = self._code_centre(centre)
-        gain = self._gain_payload(frame, seq, present, bool(hint))
+            centre_job = completed(self._code_centre(centre))
+        # the gains are measured against the hint while its payload is coded (start_encode)
+        gain = self._gain_payload(frame, seq, present, hint_job is not None)
+        image = centre_job.result()
+        hint = b"" if hint_job is None else hint_job.result()
         packet = Packet(seq=seq, timestamp_us=timestamp_us, image=image, hint=hint, gain=gain)
         if self.residual is not None and frame.shape[0] * frame.shape[1] > 1:
             packet = self.add_residual(packet, frame, self.residual)
@@ -323,12 +325,13 @@ class Encoder:
         return self._hints.coarser_key_hint() if self.depth_hint else None
 
     def coarsen_first_hint(self, frame: np.ndarray, packet: Packet, present: np.ndarray | None = None,
-                           gains: np.ndarray | None = None) -> Packet:
+                           gains: np.ndarray | None = None, payload: bytes | None = None) -> Packet:
         """Frame 0's ``packet`` with its key hint sent at twice the scale, from the same sweep,
         and its shading gains, where it has any, measured again against that hint (a frame
         without shading against the finer hint keeps none: 2.5 ms saved on a 7x7x375x540
         frame; ``gains``: that measurement where the caller made it,
-        :func:`lfstream.codec.shading.measure_gains` against :meth:`coarser_first_hint`);
+        :func:`lfstream.codec.shading.measure_gains` against :meth:`coarser_first_hint`;
+        ``payload``: :func:`lfstream.codec.hint.key_payload` of that hint, likewise);
         the frames after it follow at that scale (:attr:`hint_options`, which the header
         records). The packet is then what an encoder with that ``hint_scale`` makes of the
         frame (byte for byte on the shared samples and the synthetic clip)."""
@@ -336,7 +339,7 @@ class Encoder:
 
         if packet.seq != 0 or not packet.hint:
             raise LFValueError("coarsen_first_hint: a stream's first packet, with a hint")
-        hint = self._hints.coarsen()
+        hint = self._hints.coarsen(payload)
         self.hint_options = self._hints.options
         if self.last_gains is None:
             return replace(packet, hint=hint)

@@ -451,18 +451,14 @@ def _warp_beside(beside: Future, ranked: np.ndarray, warp) -> int:
     """Warps views of ``ranked`` in order, :data:`BESIDE_CHUNK_VIEWS` a call, on the
     calling thread alone (numba's thread count is per thread; restored) until ``beside``
     is done; returns how many it warped."""
-    import numba
+    from lfstream.codec.watchdog import single_numba_thread
 
     done = 0
-    previous = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
+    with single_numba_thread():
         while done < len(ranked) and not beside.done():
             chunk = np.ascontiguousarray(ranked[done:done + BESIDE_CHUNK_VIEWS])
             warp(chunk, np.array([0, len(chunk)], np.int64))
             done += len(chunk)
-    finally:
-        numba.set_num_threads(previous)
     return done
 
 

@@ -247,6 +247,23 @@ def test_static_video_hints_cost_a_few_bytes_and_decode_like_full_ones():
         assert np.abs(a - b).max() < H.HintOptions().precision / 2 + 0.02
 
 
+def test_start_encode_sets_the_hint_at_once_and_codes_the_same_payloads():
+    """start_encode's future holds encode's bytes, key hints and deltas alike, and the hint
+    it sends (``last``) is known before the payload is asked for; on a worker thread (the
+    lane, say) the payload is coded before it returns."""
+    from lfstream.codec.watchdog import beside
+
+    clip = synth_clip(3, 5, (64, 96), seed=5, motion=0.5, camera_pan=0.0).lf
+    one, other = H.HintTracker(H.HintOptions(key_interval=2)), H.HintTracker(H.HintOptions(key_interval=2))
+    for k, frame in enumerate(clip):
+        job = one.start_encode(frame, k)
+        assert one.last is not None and one.last.q.shape == (16, 24)
+        assert job.result(10.0) == other.encode(frame, k)
+        assert np.array_equal(one.last.q, other.last.q)
+    on_lane = beside(lambda: H.HintTracker().start_encode(clip[0], 0)).result(10.0)
+    assert on_lane.done() and on_lane.result() == H.HintTracker().encode(clip[0], 0)
+
+
 def test_a_lost_reference_is_a_clear_error_and_a_key_hint_recovers():
     clip = synth_clip(4, 5, (64, 96), seed=6, motion=0.0, camera_pan=0.0)
     tracker = H.HintTracker(H.HintOptions(key_interval=3))
@@ -441,7 +458,10 @@ def test_the_coarse_map_is_the_sweep_at_twice_the_scale():
     tracker, reference = H.HintTracker(), H.HintTracker(H.HintOptions(hint_scale=8))
     tracker.encode(clip[0], 0)
     assert tracker.coarser_key_hint().scale == 8
-    assert tracker.coarsen() == reference.encode(clip[0], 0)
+    twin = H.HintTracker()
+    twin.encode(clip[0], 0)
+    assert twin.coarsen(b"coded") == b"coded"  # a payload the caller coded already is sent as it is
+    assert tracker.coarsen() == reference.encode(clip[0], 0) == H.key_payload(twin.last)
     assert tracker.options.hint_scale == 8 and tracker.last.scale == 8
     assert tracker.encode(clip[1], 1) == reference.encode(clip[1], 1)
     assert tracker.coarser_key_hint() is None  # frame 1 is a delta, not a key hint
