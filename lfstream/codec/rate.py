@@ -35,7 +35,6 @@ sequence keyed by the centre view).
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -290,28 +289,20 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
     frame8 = np.ascontiguousarray(to_uint8(np.asarray(frame)))
     coarse = enc.coarser_first_hint() if hint_options is None else None
     coarse_check = coarse_gains = None
-    beside = False
     if coarse is not None and min(frame.shape[2:4]) // coarse.scale >= PREDICTION_CHECK_MIN_CELLS:
         # the hint at half the resolution, judged on the same luma: sent where it predicts
         # the ring as well, for the bytes it saves (coarsening_allowance); measured beside
-        # the full hint's check (its result is used only where that one passes), each on
-        # one core (single_numba_thread: the two warps took turns on both cores, 1.6 ms
-        # each against 0.6 alone on lytro_translucent)
-        from lfstream.codec.watchdog import in_background, single_numba_thread
+        # the full hint's check (its result is used only where that one passes), its
+        # payload coded there once
+        from lfstream.codec.watchdog import in_background
 
-        def check_coarse() -> tuple[float, bytes]:
-            with single_numba_thread():
-                db = prediction_psnr(frame8, coarse, enc.last_gains, present, enc.last_ring_luma,
-                                     grid_scale=enc.last_hint.scale)
-            return db, key_payload(coarse)
-
-        coarse_check = in_background(check_coarse)
-        beside = True
+        coarse_check = in_background(lambda: (prediction_psnr(frame8, coarse, enc.last_gains, present,
+                                                              enc.last_ring_luma, grid_scale=enc.last_hint.scale),
+                                              key_payload(coarse)))
         if enc.last_gains is not None:  # the gains a coarser hint would send, measured meanwhile too
             coarse_gains = in_background(lambda: measure_gains(frame8, enc.gain_grid, present=present,
                                                                disparity=coarse.values(), axes=coarse.axes))
-    with single_numba_thread() if beside else contextlib.nullcontext():
-        db = prediction_psnr(frame8, enc.last_hint, enc.last_gains, present, enc.last_ring_luma)
+    db = prediction_psnr(frame8, enc.last_hint, enc.last_gains, present, enc.last_ring_luma)
     db_coarse, coarse_payload = (None, b"") if coarse_check is None else coarse_check.result()
     if db >= PREDICTION_FLOOR_DB:
         if db_coarse is not None:

@@ -92,13 +92,17 @@ def beside(fn: Callable[[], T]) -> Future:
     """``fn()`` started beside the calling thread's critical path: the parts of one frame's
     work that only its end needs (the encoder's centre view and post-filter choice, the view
     axes detection). On a machine of at most :data:`LANE_MAX_CORES` cores they queue on one
-    lane thread, one after another, each on one core (:func:`single_numba_thread`): beside
-    the caller's parallel kernels they then take the second core in turn instead of three
-    threads splitting two cores (measured on the 2-core EPYC, the default single-frame encode,
-    lane and pool interleaved in one process, medians of 60: synthetic 12.40 -> 11.59 ms,
-    lytro_bikes 11.18 -> 10.97, lytro_translucent 11.41 -> 11.34, the same bytes; CPU 2-5 %
-    less). Elsewhere
-    :func:`in_background`. Called on the lane itself, ``fn`` runs before this returns."""
+    lane thread, one after another, instead of taking two more threads beside the caller's
+    parallel kernels (measured on the 2-core EPYC, the default single-frame encode of
+    lytro_bikes, three processes each: 11.2-11.7 ms, 19.9 ms of CPU, against 11.8-13.6 ms,
+    20.5-22.0 ms of CPU on the two worker threads; the same bytes). Elsewhere
+    :func:`in_background`. Called on the lane itself, ``fn`` runs before this returns.
+
+    The jobs keep numba's thread count: a lane job on one thread (:func:`single_numba_thread`)
+    beside the prediction checks on one thread each left the caller's OpenMP team the only
+    one in the process, and libgomp then spins its idle worker as long as on an idle machine
+    (it throttles the spin only where it runs more threads than cores): 31-34 ms of CPU an
+    encode instead of 20, 16-17 ms of wall instead of 11-12."""
     global _lane
     if _cores() > LANE_MAX_CORES:
         return in_background(fn)
@@ -107,12 +111,7 @@ def beside(fn: Callable[[], T]) -> Future:
     with _background_lock:
         if _lane is None:
             _lane = ThreadPoolExecutor(max_workers=1, thread_name_prefix=_LANE_NAME)
-
-    def alone() -> T:
-        with single_numba_thread():
-            return fn()
-
-    return _lane.submit(alone)
+    return _lane.submit(fn)
 
 
 def on_worker_thread() -> bool:
