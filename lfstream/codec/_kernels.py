@@ -728,6 +728,16 @@ def _block_mean_row(grey, i, scale, acc, out_row):  # pragma: no cover - compile
     h, w = grey.shape
     ws = out_row.shape[0]
     y1 = min((i + 1) * scale, h)
+    if scale == 2 and y1 - 2 * i == 2 and ws == w // 2:
+        # the encoder's working scale: two rows summed in one pass and pairs of columns
+        # (a constant stride the loop vectorises), the same sums and roundings as below
+        # (13 views of 375 x 540 on one thread: 0.61 -> 0.25 ms)
+        r0, r1 = grey[2 * i], grey[2 * i + 1]
+        for x in range(w):
+            acc[x] = np.int32(r0[x]) + np.int32(r1[x])
+        for j in range(ws):
+            out_row[j] = (np.float32(acc[2 * j] + acc[2 * j + 1]) * np.float32(0.25)) * np.float32(1.0 / 255.0)
+        return
     acc[:] = 0
     for y in range(i * scale, y1):
         row = grey[y]
