@@ -50,6 +50,19 @@ def test_grey_block_means_equal_opencvs_conversion_and_area_resampling(rng):
     ref = cv2.resize(cv2.cvtColor(small[1, 1, :, :8], cv2.COLOR_RGB2GRAY).astype(np.float32), (2, 1),
                      interpolation=cv2.INTER_AREA) / 255.0
     np.testing.assert_allclose(H._grids(small, [(1, 1)], 4)[0], ref, rtol=0, atol=1e-6)
+    # the working scale's own path (two rows, column pairs) and the general one it leaves
+    # to where a block is cut short (one row, an odd last column): the same sums and roundings
+    grey = rng.integers(0, 256, (2, 5, 9), dtype=np.uint8)
+    for rows in (5, 1):
+        part = np.ascontiguousarray(grey[:, :rows])
+        got = np.empty((2, max(1, rows // 2), 4), np.float32)
+        block_means(part, 2, got)
+        for n in range(2):
+            for i in range(got.shape[1]):
+                block = part[n, 2 * i: 2 * i + 2, :8].astype(np.int64).reshape(-1, 4, 2).transpose(1, 0, 2)
+                sums, count = block.reshape(4, -1).sum(axis=1), block[0].size
+                want = (sums.astype(np.float32) * np.float32(1.0 / count)) * np.float32(1 / 255.0)
+                np.testing.assert_array_equal(got[n, i], want)
 
 
 def test_sweep_cost_matches_a_plain_reference(rng):
