@@ -53,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
         write_lf(args.output, lf, fps=fps, overwrite=args.overwrite)
         done = len(lf)
     else:
-        writer = FrameWriter(args.output, source.count, fps=fps, lossless=not args.lossy, overwrite=args.overwrite)
+        writer = FrameWriter(args.output, source.count, fps=fps, lossless=not args.lossy, overwrite=args.overwrite,
+                             first_index=args.first_frame)  # a folder's frames keep the source's numbers
         damage = None
         try:
             try:

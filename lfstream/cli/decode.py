@@ -68,7 +68,9 @@ def run(args: argparse.Namespace) -> int:
                 with interrupt_after():  # a frame's outputs are written whole
                     t_write = time.perf_counter()
                     if writer is None:
-                        writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite)
+                        # a folder's frames keep the stream's numbers, as the maps do
+                        writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite,
+                                             first_index=f.seq)
                     writer.write(f.lf)
                     write_s += time.perf_counter() - t_write
                     count += 1

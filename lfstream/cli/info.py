@@ -145,7 +145,7 @@ def _describe_input(args: argparse.Namespace) -> dict:
     7x7x375x540, against a few milliseconds); everything else is read."""
     from lfstream.cli._common import read_options
     from lfstream.errors import LFFormatError
-    from lfstream.io import VIDEO_EXTS, open_video_lf, reads_lazily
+    from lfstream.io import VIDEO_EXTS, open_video_lf, reads_lazily, video_folder_format
 
     if not reads_lazily(args.input):
         return describe(load_from_args(args))
@@ -154,7 +154,10 @@ def _describe_input(args: argparse.Namespace) -> dict:
         raise type(video.damage)(f"{video.damage} ({video.count} complete frame(s) before it)")
     if not video.count:
         raise LFFormatError(f"{args.input}: contains no frames")
-    fmt = "view-videos" if args.input.is_dir() else "video" if args.input.suffix.lower() in VIDEO_EXTS else "lfs"
+    # a folder of frame folders (what decode -o FOLDER writes) was described as view videos,
+    # and looking for their codec raised an IndexError
+    fmt = video_folder_format(args.input) if args.input.is_dir() else \
+        "video" if args.input.suffix.lower() in VIDEO_EXTS else "lfs"
     (u, v), (h, w), frames = video.views, video.size, video.count
     missing = None if video.present is None else [[int(r), int(c)] for r, c in zip(*np.nonzero(~video.present))]
     out = {"path": str(args.input), "format": fmt, "frames": frames, "views": [u, v], "size": [h, w], "channels": 3,

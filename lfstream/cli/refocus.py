@@ -85,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
 
                 record = disparity_record(t, estimate_disparity(frame, present=source.present))
             with interrupt_after():  # a frame's planes, video frames and record are written together
-                folder = out if single else out / f"frame_{t:06d}"
+                # a range of a video keeps the source's frame numbers
+                folder = out if single else out / f"frame_{args.first_frame + t:06d}"
                 folder.mkdir(exist_ok=True)
                 for k, img in enumerate(stack):
                     name = folder / f"plane_{k:02d}.png"

@@ -91,6 +91,9 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)
         summary = stopped_summary("tcp" if args.to else args.transport)
+    # the stream numbers its own frames from 0 (summary's per_frame, frames/): where it started
+    # in the input, for relating them to the source's
+    summary["first_frame"] = args.first_frame
     viewer = _pipeline.write_page(args, summary, out)
     _pipeline.report(args, summary, out)
     if viewer is not None and not args.json:

@@ -22,6 +22,7 @@ from lfstream.io.readers import (
     open_video_lf,
     read_lf,
     reads_lazily,
+    video_folder_format,
 )
 from lfstream.io.video import (
     GRID_METADATA_KEY,
@@ -50,6 +51,7 @@ __all__ = [
     "open_video_lf",
     "open_lf_frames",
     "reads_lazily",
+    "video_folder_format",
     "LAZY_EXTS",
     "write_lf",
     "FrameWriter",

@@ -358,6 +358,13 @@ def reads_lazily(path: str | os.PathLike) -> bool:
     return path.suffix.lower() in LAZY_EXTS and path.is_file()
 
 
+def video_folder_format(folder: str | os.PathLike) -> str:
+    """The format :func:`load_lf` names a folder that :func:`reads_lazily`: ``"view-videos"``
+    (one video per view) or ``"frames-folder"`` (one sub-folder of view images, or one
+    single-frame ``.npy``, per frame)."""
+    return "view-videos" if _lazy_folder_kind(Path(folder)) == "view-videos" else "frames-folder"
+
+
 def _frame_entries(folder: Path) -> list[Path]:
     """A frames folder's entries in name order (hidden ones left out)."""
     return sorted(p for p in folder.iterdir() if not p.name.startswith("."))
@@ -711,8 +718,8 @@ def _load_folder(folder: Path, opts: ReadOptions) -> LoadedLF:
     if lazy is not None:  # an LF video folder: the lazy reader's frames, collected
         # (the crop and flips come after, as for any folder)
         video = open_video_lf(folder, dataclasses.replace(opts, crop=None, flip_u=False, flip_v=False))
-        return LoadedLF(lf=collect_frames(video.frames, video.count, folder),
-                        format="view-videos" if lazy == "view-videos" else "frames-folder", path=folder,
+        return LoadedLF(lf=collect_frames(video.frames, video.count, folder), format=video_folder_format(folder),
+                        path=folder,
                         present=video.present, fps=video.fps)
     if kind == "sai-folder":
         _, views, found_grid = _scan_view_files(folder, IMAGE_EXTS)

@@ -144,10 +144,12 @@ class FrameWriter:
             ``overwrite``.
         count: frames to come (required for ``.npy``; the file holds exactly that many).
         fps, lossless, image_ext: as :func:`write_lf`.
+        first_index: the number of the first frame's folder (``frame_NNNNNN/``), the next
+            ones counting on: a range of a video keeps its source's frame numbers.
     """
 
     def __init__(self, path: str | os.PathLike, count: int | None = None, *, fps: float = 30.0, lossless: bool = True,
-                 overwrite: bool = False, image_ext: str = ".png") -> None:
+                 overwrite: bool = False, image_ext: str = ".png", first_index: int = 0) -> None:
         self.path = Path(path)
         self._ext = self.path.suffix.lower()
         if self._ext in IMAGE_EXTS or self._ext in NOT_LF_EXTS:
@@ -160,6 +162,7 @@ class FrameWriter:
         self._fps, self._lossless, self._image_ext = fps, lossless, image_ext
         self._video = None
         self._made_folder = False
+        self._first_index = int(first_index)
         self.frames = 0
 
     def write(self, lf: np.ndarray) -> None:
@@ -178,7 +181,7 @@ class FrameWriter:
             if not self.path.exists():
                 self.path.mkdir(parents=True)
                 self._made_folder = True
-            _write_views(self.path / f"frame_{self.frames:06d}", lf, self._image_ext)
+            _write_views(self.path / f"frame_{self._first_index + self.frames:06d}", lf, self._image_ext)
         self.frames += 1
 
     def close(self, partial: bool = False) -> None:

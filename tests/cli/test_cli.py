@@ -834,6 +834,40 @@ def test_a_frame_range_of_a_video_through_the_commands(capsys, tmp_path):
     assert code == 2 and "--first-frame" in err and "--frames" in err and not (tmp_path / "out").exists()
 
 
+def test_a_frame_range_keeps_the_source_frame_numbers_in_every_output_of_a_run(capsys, tmp_path):
+    """A range's frame folders are named by the source's frame numbers (``decode -o FOLDER``
+    with its ``--disparity-out`` maps, whose names they did not match: views of frame 3 in
+    frame_000000/, its map frame_000003.pfm; ``convert`` to a folder; ``refocus``); the stream
+    numbers its own frames from 0 and records the range's start in ``summary.json``. ``info``
+    describes such a folder (it raised an IndexError looking for view videos), and it reads
+    back as the frames it holds."""
+    import lfstream
+
+    clip = synth_clip(5, 3, (24, 32), seed=7, noise=2.0).lf
+    (tmp_path / "c.lfs").write_bytes(lfstream.encode(clip))
+    lfstream.write_lf(tmp_path / "src.npy", clip)
+    code, _, _ = run(capsys, "decode", tmp_path / "c.lfs", "-o", tmp_path / "dec", "--first-frame", "3",
+                     "--disparity-out", tmp_path / "maps")
+    assert code == 0
+    assert sorted(p.name for p in (tmp_path / "dec").iterdir()) == ["frame_000003", "frame_000004"]
+    assert sorted(p.name for p in (tmp_path / "maps").iterdir()) == ["frame_000003.pfm", "frame_000004.pfm"]
+    np.testing.assert_array_equal(lfstream.read_lf(tmp_path / "dec"), lfstream.decode((tmp_path / "c.lfs").read_bytes())[3:])
+    code, out, _ = run(capsys, "info", tmp_path / "dec", "--json")
+    assert code == 0 and json.loads(out)["format"] == "frames-folder" and json.loads(out)["frames"] == 2
+    assert "video" not in json.loads(out)
+    code, _, _ = run(capsys, "convert", tmp_path / "src.npy", tmp_path / "cut", "--first-frame", "1", "--max-frames", "2")
+    assert code == 0 and sorted(p.name for p in (tmp_path / "cut").iterdir()) == ["frame_000001", "frame_000002"]
+    code, _, _ = run(capsys, "refocus", tmp_path / "src.npy", "-o", tmp_path / "rf", "--first-frame", "2",
+                     "--max-frames", "2", "--no-viewer")
+    assert code == 0 and sorted(p.name for p in (tmp_path / "rf").glob("frame_*")) == ["frame_000002", "frame_000003"]
+    code, out, _ = run(capsys, "stream", tmp_path / "src.npy", "-o", tmp_path / "st", "--first-frame", "2",
+                       "--save", "png", "--no-viewer", "--json")
+    summary = json.loads(out)
+    assert code == 0 and summary["first_frame"] == 2 and summary["frames"] == 3
+    assert [row["frame"] for row in summary["per_frame"]] == [0, 1, 2]
+    assert sorted(p.name for p in (tmp_path / "st" / "frames").iterdir()) == [f"frame_{k:06d}" for k in range(3)]
+
+
 def test_a_stream_of_an_input_cut_short_ends_there_with_its_outputs(capsys, tmp_path):
     """An input damaged after its first frames (an .lfs cut short) ends the stream there:
     the frames before it go through every stage, the outputs and summary.json are written
