@@ -439,9 +439,13 @@ def to_uint8(x: ArrayT) -> ArrayT:
         torch = sys.modules["torch"]
         if x.dtype == torch.uint8:
             return x
+        if not x.is_floating_point():
+            raise LFValueError(f"expected uint8 or float samples in [0, 1], got {x.dtype}")
         return torch.nan_to_num(x.float() * 255.0 + 0.5, nan=0.0).clamp_(0, 255).to(torch.uint8)
     if x.dtype == np.uint8:
         return x
+    if not np.issubdtype(x.dtype, np.floating):  # another integer type's scale is a guess
+        raise LFValueError(f"expected uint8 or float samples in [0, 1], got {x.dtype}")
     y = np.nan_to_num(np.asarray(x, np.float32) * np.float32(255.0) + np.float32(0.5), nan=0.0)
     return np.clip(y, 0, 255).astype(np.uint8)
 
@@ -481,9 +485,16 @@ FLOAT_RANGE_SLACK = 1.0
 
 def check_unit_range(x: np.ndarray, name: str = "lf") -> None:
     """Raises :class:`LFValueError` if a float array's values reach further outside ``[0, 1]``
-    than :data:`FLOAT_RANGE_SLACK` (integer arrays pass: their range is their dtype's)."""
+    than :data:`FLOAT_RANGE_SLACK`, or the samples are neither uint8 nor float (another
+    integer type's scale is a guess: 8-bit levels in an int64 array, say, read as floats
+    saturated to white)."""
     a = np.asarray(x)
-    if not np.issubdtype(a.dtype, np.floating) or a.size == 0:
+    if a.dtype == np.uint8:
+        return
+    if not np.issubdtype(a.dtype, np.floating):
+        raise LFValueError(f"{name}: {a.dtype} samples; expected uint8, or float in [0, 1] (8-bit levels in "
+                           "another integer type: .astype(np.uint8))")
+    if a.size == 0:
         return
     lo, hi = float(a.min()), float(a.max())
     if lo < -FLOAT_RANGE_SLACK or hi > 1.0 + FLOAT_RANGE_SLACK:

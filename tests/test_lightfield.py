@@ -164,10 +164,25 @@ def test_canonical_views_leave_the_convention_and_no_axes_as_they_are():
 def test_check_unit_range_clips_overshoot_and_refuses_other_units():
     from lfstream.lightfield import FLOAT_RANGE_SLACK, check_unit_range
 
-    check_unit_range(np.full((3, 3), 255, np.uint8))  # integers: their dtype's range
+    check_unit_range(np.full((3, 3), 255, np.uint8))  # 8-bit levels
     check_unit_range(np.array([-0.02, 0.5, 1.03], np.float32))  # resampling overshoot
     check_unit_range(np.array([-FLOAT_RANGE_SLACK, 1.0 + FLOAT_RANGE_SLACK]))
     check_unit_range(np.zeros((0, 3), np.float32))
     for bad in (np.array([0.0, 255.0], np.float32), np.array([-1.5, 0.5])):
         with pytest.raises(LFValueError, match=r"frame 3: float values span .* divide by 255"):
             check_unit_range(bad, "frame 3")
+    # another integer type's scale is a guess (8-bit levels in int64 were read as floats and
+    # saturated to white): refused, naming the frame, empty or not
+    for dtype in (np.int64, np.int16, np.uint16, bool):
+        for shape in ((3, 3), (0, 3)):
+            with pytest.raises(LFValueError, match=rf"frame 3: {np.dtype(dtype).name} samples; expected uint8"):
+                check_unit_range(np.zeros(shape, dtype), "frame 3")
+
+
+def test_to_uint8_refuses_other_integer_samples():
+    import torch
+
+    for bad in (np.arange(3, dtype=np.int64), np.ones(3, np.uint16), np.ones(3, bool), torch.arange(3)):
+        with pytest.raises(LFValueError, match="expected uint8 or float samples"):
+            to_uint8(bad)
+    assert to_uint8(torch.tensor([0.0, 0.5, 1.0])).tolist() == [0, 128, 255]

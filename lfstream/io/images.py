@@ -28,7 +28,7 @@ def read_image(path: Path) -> np.ndarray:
     if img is None:
         raise LFFormatError(f"{path}: not a readable image")
     if img.dtype == np.uint16:
-        img = ((img.astype(np.uint32) + 128) // 257).astype(np.uint8)
+        img = eight_bit(img)
     elif img.dtype != np.uint8:
         raise LFFormatError(f"{path}: unsupported image sample type {img.dtype}")
     if img.ndim == 2:
@@ -36,6 +36,12 @@ def read_image(path: Path) -> np.ndarray:
     if img.shape[2] == 4:
         return cv2.cvtColor(img, cv2.COLOR_BGRA2RGBA)
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+def eight_bit(samples: np.ndarray) -> np.ndarray:
+    """16-bit samples (uint16, 0..65535) as 8-bit ones: ``round(x / 257)``, exact in integers
+    (65535 / 257 = 255)."""
+    return ((samples.astype(np.uint32) + 128) // 257).astype(np.uint8)
 
 
 def write_image(path: Path, img: np.ndarray) -> None:
@@ -78,4 +84,4 @@ def read_eslf(path: Path, angular: int, crop: int | None = None) -> tuple[np.nda
     return full, weight
 
 
-__all__ = ["IMAGE_EXTS", "read_image", "write_image", "read_eslf"]
+__all__ = ["IMAGE_EXTS", "read_image", "write_image", "read_eslf", "eight_bit"]

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError, LFValueError
-from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image
+from lfstream.io.images import IMAGE_EXTS, eight_bit, read_eslf, read_image
 from lfstream.io.video import VIDEO_EXTS, collect_frames, iter_video_frames, video_info
 from lfstream.lightfield import (
     MAX_VIEWS_PER_AXIS,
@@ -298,8 +298,12 @@ def _read_array_file(path: Path, opts: ReadOptions = ReadOptions()) -> LoadedLF:
         if isinstance(exc, LFFormatError):
             raise
         raise LFFormatError(f"{path}: not a readable {path.suffix} array ({exc})") from exc
-    if not isinstance(lf, np.ndarray) or lf.dtype.kind not in "uf":
-        raise LFFormatError(f"{path}: expected a numeric array, got {getattr(lf, 'dtype', type(lf))}")
+    # uint8, float in [0, 1], or 16-bit samples (taken to 8 bits as 16-bit images are); any
+    # other integer type's scale is a guess (uint16 ones were read as floats and saturated
+    # to white), so it is refused
+    if not isinstance(lf, np.ndarray) or not (lf.dtype == np.uint8 or lf.dtype == np.uint16 or lf.dtype.kind == "f"):
+        raise LFFormatError(f"{path}: {getattr(lf, 'dtype', type(lf))} samples; expected uint8, uint16 or float "
+                            "in [0, 1]")
     try:
         check_lf(lf, name=str(path))
     except LFShapeError as exc:
@@ -312,6 +316,8 @@ def _read_array_file(path: Path, opts: ReadOptions = ReadOptions()) -> LoadedLF:
         # the range copied out of the mapped file (a .npy; a still whole), or out of the
         # whole array (a .npz's member is read whole), which is then freed
         lf = np.array(lf)
+    if lf.dtype == np.uint16:
+        lf = eight_bit(lf)
     return LoadedLF(lf=lf, format=fmt, path=path, disparity=disparity)
 
 

@@ -59,6 +59,22 @@ def test_npy_npz_round_trip(tmp_path, rng):
     assert loaded.frames == 2 and loaded.views == (3, 3) and loaded.size == (6, 7)
 
 
+def test_array_files_take_16_bit_samples_to_8_bits_and_refuse_other_integers(tmp_path, rng):
+    """A uint16 array is 16-bit samples, taken to 8 bits as a 16-bit image is (round(x /
+    257)), whole or a frame range at a time; any other integer or bool array is one clear
+    error (a uint16 array was read as floats and saturated to white)."""
+    video = random_lf(rng, (3, 2, 2, 5, 6, 3))
+    # within 128 of a level's 16-bit value (v * 257) rounds to that level
+    sixteen = video.astype(np.int64) * 257 + rng.integers(-128, 129, video.shape)
+    np.save(tmp_path / "s.npy", sixteen.clip(0, 65535).astype(np.uint16))
+    np.testing.assert_array_equal(read_lf(tmp_path / "s.npy"), video)
+    np.testing.assert_array_equal(read_lf(tmp_path / "s.npy", first_frame=1, max_frames=1), video[1:2])
+    for dtype in (np.int64, np.int16, np.uint32, bool):
+        np.save(tmp_path / "bad.npy", video.astype(dtype))
+        with pytest.raises(LFFormatError, match=rf"bad.npy: {np.dtype(dtype).name} samples; expected uint8, uint16"):
+            read_lf(tmp_path / "bad.npy")
+
+
 def test_existing_output_is_not_overwritten(tmp_path, rng):
     lf = random_lf(rng)
     write_lf(tmp_path / "a.npy", lf)
