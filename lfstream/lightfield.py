@@ -483,18 +483,29 @@ def check_finite(x: ArrayT, name: str = "lf") -> None:
 FLOAT_RANGE_SLACK = 1.0
 
 
+def check_samples(x: ArrayT, name: str = "lf") -> None:
+    """Raises :class:`LFValueError` naming ``name`` unless the samples are uint8 (8-bit
+    levels) or float (``[0, 1]``), numpy or torch: another integer type's scale is a guess
+    (8-bit levels in an int64 array were read as floats and saturated to white)."""
+    if is_tensor(x):
+        ok = x.is_floating_point() or x.dtype == sys.modules["torch"].uint8
+        dtype = str(x.dtype).replace("torch.", "")
+    else:
+        a = np.asarray(x)
+        ok, dtype = a.dtype == np.uint8 or np.issubdtype(a.dtype, np.floating), a.dtype.name
+    if not ok:
+        raise LFValueError(f"{name}: {dtype} samples; expected uint8, or float in [0, 1] (8-bit levels in "
+                           "another integer type: .astype(np.uint8))")
+
+
 def check_unit_range(x: np.ndarray, name: str = "lf") -> None:
     """Raises :class:`LFValueError` if a float array's values reach further outside ``[0, 1]``
     than :data:`FLOAT_RANGE_SLACK`, or the samples are neither uint8 nor float (another
     integer type's scale is a guess: 8-bit levels in an int64 array, say, read as floats
     saturated to white)."""
     a = np.asarray(x)
-    if a.dtype == np.uint8:
-        return
-    if not np.issubdtype(a.dtype, np.floating):
-        raise LFValueError(f"{name}: {a.dtype} samples; expected uint8, or float in [0, 1] (8-bit levels in "
-                           "another integer type: .astype(np.uint8))")
-    if a.size == 0:
+    check_samples(a, name)
+    if a.dtype == np.uint8 or a.size == 0:
         return
     lo, hi = float(a.min()), float(a.max())
     if lo < -FLOAT_RANGE_SLACK or hi > 1.0 + FLOAT_RANGE_SLACK:
@@ -506,6 +517,7 @@ __all__ = [
     "view_offsets",
     "canonical_views",
     "axes_as_list",
+    "check_samples",
     "check_unit_range",
     "FLOAT_RANGE_SLACK",
     "to_network_input",

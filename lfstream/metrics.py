@@ -74,6 +74,11 @@ def _pair(
     for t in (tx, ty):
         if not (t.is_floating_point() or t.dtype == torch.uint8):
             raise LFValueError(f"metrics: expected uint8 or float data, got {t.dtype}")
+    if (tx.dtype == torch.uint8) != (ty.dtype == torch.uint8) and data_range is None:
+        # 8-bit levels against floats in [0, 1]: one scale (the convention's), not the raw
+        # samples (a light field against itself divided by 255 measured 4.8 dB)
+        tx, ty = (t.to(dtype) / 255.0 if t.dtype == torch.uint8 else t for t in (tx, ty))
+        rng = 1.0
     return tx.to(dtype), ty.to(dtype), rng, is_torch
 
 
@@ -84,8 +89,11 @@ def _out(t: torch.Tensor, is_torch: bool):
     return float(arr) if arr.ndim == 0 else arr
 
 
-def _numpy_pair(x: np.ndarray, y: np.ndarray, data_range: float | None) -> float:
-    """Checks two numpy images for a metric; returns their data range (255 for uint8, 1 for float)."""
+def _numpy_pair(x: np.ndarray, y: np.ndarray, data_range: float | None) -> tuple[np.ndarray, np.ndarray, float]:
+    """Checks two numpy images for a metric; returns them and their data range (255 for
+    uint8, 1 for float). uint8 against float (no ``data_range``): the uint8 one in ``[0, 1]``
+    too, one scale as the convention has it (the raw samples compared measured the scales'
+    difference: 4.8 dB for a light field against itself divided by 255)."""
     if x.shape != y.shape:
         raise LFShapeError(f"metrics: shapes differ: {x.shape} vs {y.shape}")
     if x.ndim < 3:
@@ -93,10 +101,12 @@ def _numpy_pair(x: np.ndarray, y: np.ndarray, data_range: float | None) -> float
     for a in (x, y):
         if not (a.dtype == np.uint8 or np.issubdtype(a.dtype, np.floating)):
             raise LFValueError(f"metrics: expected uint8 or float data, got {a.dtype}")
+    if (x.dtype == np.uint8) != (y.dtype == np.uint8) and data_range is None:
+        x, y = (a.astype(np.float32) / np.float32(255.0) if a.dtype == np.uint8 else a for a in (x, y))
     rng = float(data_range) if data_range is not None else (255.0 if x.dtype == np.uint8 else 1.0)
     if not math.isfinite(rng) or rng <= 0:
         raise LFValueError(f"data_range: must be positive and finite, got {data_range!r}")
-    return rng
+    return x, y, rng
 
 
 def _psnr_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
@@ -104,7 +114,7 @@ def _psnr_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
     ~20x faster than a float64 torch pass over a 7x7x375x540 light field)."""
     import cv2
 
-    rng = _numpy_pair(x, y, data_range)
+    x, y, rng = _numpy_pair(x, y, data_range)
     h, w, c = x.shape[-3:]
     if x.dtype != y.dtype or x.dtype not in (np.uint8, np.float32, np.float64):
         x, y = x.astype(np.float64), y.astype(np.float64)
@@ -209,7 +219,7 @@ def _ssim_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
     8x faster than OpenCV's float64 filters on a 7x7x375x540 light field (0.2 vs 1.6 s)."""
     from lfstream._kernels import ssim_images
 
-    rng = _numpy_pair(x, y, data_range)
+    x, y, rng = _numpy_pair(x, y, data_range)
     h, w, c = x.shape[-3:]
     if h < SSIM_WINDOW or w < SSIM_WINDOW:
         raise LFShapeError(f"ssim: images must be at least {SSIM_WINDOW}x{SSIM_WINDOW}, got {h}x{w}")
@@ -236,7 +246,8 @@ def _check_lf_pair(ref, test) -> None:
 def mpsnr(ref, test, data_range: float | None = None, present=None):
     """Mean PSNR over the views of a light field (seed Eq. 3.10).
 
-    Infinite if any view is identical (see :data:`PSNR_CAP_DB` for tables). ``present``: a
+    Infinite if any view is identical (see :data:`PSNR_CAP_DB` for tables). 8-bit levels
+    against floats in ``[0, 1]`` are compared on one scale (without ``data_range``). ``present``: a
     ``(U, V)`` bool mask of the views that exist in the reference (a light field read with
     missing views); the mean is over those only, never over zero-filled stand-ins.
 

@@ -140,3 +140,21 @@ def test_bd_pchip_uses_the_pareto_front_and_agrees_with_the_cubic_fit_on_smooth_
     assert bd_rate(rates, psnrs, rates, other) == pytest.approx(bd_rate(rates, psnrs, rates, other, method="cubic"), abs=1.5)
     with pytest.raises(LFValueError):
         bd_rate(rates, psnrs, rates, other, method="spline")
+
+
+def test_8_bit_levels_against_floats_are_measured_on_one_scale(rng):
+    """uint8 against float in [0, 1] (the stream's metrics of a float input against its
+    uint8 decode): the uint8 side is taken to [0, 1], as the convention has them the same
+    values; compared raw they measured the scales' difference (about -41 dB, or 4.8 dB for
+    a light field against itself divided by 255). With ``data_range`` given, as given."""
+    ref = random_lf(rng, (3, 3, 16, 16, 3))
+    test = np.clip(ref.astype(np.int64) + rng.integers(-12, 13, ref.shape), 0, 255).astype(np.uint8)
+    as_float = test.astype(np.float32) / np.float32(255.0)
+    for numpy_or_torch in (lambda a: a, torch.from_numpy):
+        a, b = numpy_or_torch(ref), numpy_or_torch(as_float)
+        assert float(mpsnr(a, b)) == pytest.approx(float(mpsnr(ref, test)), abs=1e-4)
+        assert float(mpsnr(b, a)) == pytest.approx(float(mpsnr(ref, test)), abs=1e-4)
+        assert float(mssim(a, b)) == pytest.approx(float(mssim(ref, test)), abs=1e-5)
+    assert math.isinf(mpsnr(ref, ref.astype(np.float32) / np.float32(255.0)))
+    raw = mpsnr(ref, as_float, data_range=255.0)  # the caller's range: the samples as they are
+    assert raw < 10 < float(mpsnr(ref, test))  # the scales' difference, not the noise

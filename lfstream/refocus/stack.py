@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from lfstream.errors import LFShapeError, LFValueError
-from lfstream.lightfield import aperture_weights, check_finite, check_lf, is_tensor, to_network_input
+from lfstream.lightfield import aperture_weights, check_finite, check_lf, check_samples, is_tensor, to_network_input
 from lfstream.optics import SEED_ALPHAS, slopes_from_alphas
 from lfstream.refocus.planes import resolve_slopes, slope_range
 from lfstream.refocus.shift_sum import shift_and_sum
@@ -53,6 +53,7 @@ def focal_stack(
     """
     s = resolve_slopes(alphas, slopes)
     check_lf(lf)
+    check_samples(lf)  # an int16 light field came back as a stack of ones
     u, v = int(lf.shape[-5]), int(lf.shape[-4])
     if weights is not None and aperture is not None:
         raise LFValueError("give aperture or weights, not both")

@@ -868,6 +868,25 @@ def test_a_frame_range_keeps_the_source_frame_numbers_in_every_output_of_a_run(c
     assert sorted(p.name for p in (tmp_path / "st" / "frames").iterdir()) == [f"frame_{k:06d}" for k in range(3)]
 
 
+def test_a_float_input_streams_with_the_metrics_of_its_8_bit_levels(capsys, tmp_path):
+    """A float light field in [0, 1] streamed: the metrics compare it with the uint8 decode on
+    one scale (they compared the raw samples, about -41 dB; then, with mixed scales refused,
+    the metrics stage failed): the same MPSNR and MSSIM as the same input in 8 bits."""
+    import lfstream
+
+    clip = synth_clip(2, 5, (48, 64), seed=3, noise=2.0).lf
+    lfstream.write_lf(tmp_path / "u8.npy", clip)
+    np.save(tmp_path / "f32.npy", clip.astype(np.float32) / np.float32(255.0))
+    results = []
+    for name in ("u8.npy", "f32.npy"):
+        code, out, _ = run(capsys, "stream", tmp_path / name, "-o", tmp_path / name.replace(".", "_"), "--no-viewer",
+                           "--json")
+        assert code == 0
+        results.append(json.loads(out))
+    assert results[1]["mpsnr"] == pytest.approx(results[0]["mpsnr"], abs=1e-4) and results[0]["mpsnr"] > 20
+    assert results[1]["mssim"] == pytest.approx(results[0]["mssim"], abs=1e-5)
+
+
 def test_a_stream_of_an_input_cut_short_ends_there_with_its_outputs(capsys, tmp_path):
     """An input damaged after its first frames (an .lfs cut short) ends the stream there:
     the frames before it go through every stage, the outputs and summary.json are written

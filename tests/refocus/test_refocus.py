@@ -172,6 +172,18 @@ def test_input_dtypes_keep_their_range(rng, dtype):
     np.testing.assert_allclose(np.asarray(out, np.float32) / (255.0 if dtype == np.uint8 else 1.0), ref, atol=tol)
 
 
+@pytest.mark.parametrize("dtype", [np.int16, np.uint16, np.int64, bool])
+def test_other_integer_samples_are_one_clear_error(rng, dtype):
+    """Samples that are neither 8-bit levels nor floats in [0, 1]: one line (an int16 light
+    field came back as a stack of ones), numpy or torch."""
+    lf = random_lf(rng, (3, 3, 12, 12, 3)).astype(dtype)
+    with pytest.raises(LFValueError, match=rf"lf: {np.dtype(dtype).name} samples; expected uint8, or float"):
+        focal_stack(lf, [1.0])
+    if dtype != np.uint16:  # (torch's uint16 is not a full dtype)
+        with pytest.raises(LFValueError, match="samples; expected uint8, or float"):
+            focal_stack(torch.from_numpy(lf), [1.0])
+
+
 def test_extreme_alphas_stay_finite(rng):
     lf = random_lf(rng, (5, 5, 10, 10, 3))
     out = shift_and_sum(lf, [slope_from_alpha(a) for a in (1e-12, 1e-3, 1e3, 1e12)])
