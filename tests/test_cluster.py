@@ -72,6 +72,42 @@ def test_decode_mode_reassembles_frames_in_order(videos, tmp_path):
     assert np.array_equal(np.load(dec.files[0].output), lfstream.decode(open(lfs, "rb").read()))
 
 
+def test_decode_mode_takes_a_frame_range(videos, tmp_path):
+    """``first_frame`` / ``max_frames`` in decode mode (they were ignored: every frame was
+    decoded): the frames of the range, whichever groups and key hints they fall in, the same
+    as lfstream.decode's; a folder's frames keep the stream's numbers; a start past the end
+    fails that input alone; the options that shape light fields read for an encode are
+    refused before any folder is made."""
+    from lfstream.io import ReadOptions
+
+    paths, _ = videos
+    enc = batch([paths[0]], tmp_path / "lfs", group_frames=2, encode=EncodeOptions(quality=60))
+    lfs = enc.files[0].output
+    whole = lfstream.decode(open(lfs, "rb").read())
+    for first, most in ((3, 2), (1, None), (6, 5), (0, 1)):
+        out = tmp_path / f"dec{first}"
+        dec = batch([lfs], out, mode="decode", group_frames=2, read=ReadOptions(first_frame=first, max_frames=most))
+        stop = len(whole) if most is None else min(len(whole), first + most)
+        assert dec.ok and dec.files[0].frames == stop - first
+        np.testing.assert_array_equal(np.load(dec.files[0].output), whole[first:stop])
+    dec = batch([lfs], tmp_path / "folders", mode="decode", group_frames=3, output_format="",
+                read=ReadOptions(first_frame=4, max_frames=2))
+    assert sorted(p.name for p in (tmp_path / "folders" / "clip0").iterdir()) == ["frame_000004", "frame_000005"]
+    late = batch([lfs], tmp_path / "late", mode="decode", read=ReadOptions(first_frame=7))
+    assert not late.ok and "first_frame 7: it holds 7 frame(s)" in late.files[0].error
+    with pytest.raises(LFValueError, match="a decode takes first_frame and max_frames"):
+        batch([lfs], tmp_path / "cropped", mode="decode", read=ReadOptions(crop=3))
+    assert not (tmp_path / "cropped").exists()
+    # the output format: "folder" is folders of views, "avi" its extension; an unknown one
+    # is refused (it was appended to the name: --format folder wrote clip0folder/)
+    named = batch([lfs], tmp_path / "named", mode="decode", output_format="folder", read=ReadOptions(max_frames=1))
+    assert named.ok and (tmp_path / "named" / "clip0" / "frame_000000").is_dir()
+    assert batch([lfs], tmp_path / "avi", mode="decode", output_format="avi").files[0].output.endswith("clip0.avi")
+    with pytest.raises(LFValueError, match="output_format: .npy, .npz"):
+        batch([lfs], tmp_path / "odd", mode="decode", output_format="xyz")
+    assert not (tmp_path / "odd").exists()
+
+
 def test_batch_encode_with_an_av1_preset_equals_a_single_encode(videos, tmp_path):
     paths, _ = videos
     rep = batch([paths[0]], tmp_path / "av1", group_frames=100, encode=EncodeOptions(quality=60, preset="balanced"))

@@ -39,8 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto", help="decode: disparity source")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto", help="decode: JPEG-Hance")
     p.add_argument("--device", default="cpu", help="decode: where the networks run")
-    p.add_argument("--format", default=".npy", help="decode: output extension (.npy, .npz, .avi, .mp4, .mkv or '' for "
-                   "folders of views)")
+    p.add_argument("--format", default=".npy", help="decode: output extension (.npy, .npz, .avi, .mp4, .mkv or '' / folder "
+                   "for folders of views)")
     p.add_argument("--overwrite", action="store_true")
     add_read_options(p)
     p.add_argument("--json", action="store_true")

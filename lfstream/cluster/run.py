@@ -31,6 +31,7 @@ from lfstream.cluster.jobs import (
     split_stream_bytes,
 )
 from lfstream.errors import LFFormatError, LFStreamError, LFValueError
+from lfstream.lightfield import frames_in_range
 
 ENGINES = ("local", "ray")
 MODES = ("encode", "decode")
@@ -89,6 +90,22 @@ class _Job:
     args: tuple
 
 
+def _decode_suffix(output_format: str) -> str:
+    """A decode's output extension: ``.npy``, ``.npz``, a video's, or ``""`` (``"folder"`` too)
+    for folders of views; ``npy`` without its dot is ``.npy``. Anything else is refused (an
+    unknown one was appended to the name as it was: ``--format folder`` wrote ``clipfolder/``)."""
+    from lfstream.io.video import VIDEO_EXTS
+
+    fmt = str(output_format).strip().lower()
+    if fmt in ("", "folder"):
+        return ""
+    fmt = fmt if fmt.startswith(".") else "." + fmt
+    if fmt not in (".npy", ".npz", *VIDEO_EXTS):
+        raise LFValueError(f"output_format: .npy, .npz, a video's ({', '.join(VIDEO_EXTS)}) or '' for folders of "
+                           f"views, got {output_format!r}")
+    return fmt
+
+
 def _output_name(path: Path, suffix: str, taken: set[str]) -> str:
     stem = path.name if path.is_dir() else path.stem
     name, k = f"{stem}{suffix}", 1
@@ -142,14 +159,18 @@ class _Outputs:
             self.frames += len(result.packets)
             return
         plan = self.plans[file]
-        self.frames += len(result.frames)
-        self.nbytes += int(result.frames.nbytes)
+        lo, hi = plan["first"] - result.start, plan["stop"] - result.start  # the range, in this group
+        frames = result.frames[max(lo, 0): max(hi, 0)]
+        self.frames += len(frames)
+        self.nbytes += int(frames.nbytes)
         try:
             if self.writer is None:
                 from lfstream.io import FrameWriter
 
-                self.writer = FrameWriter(plan["target"], plan["count"], fps=plan["fps"], overwrite=self.overwrite)
-            for frame in result.frames:
+                # a folder's frames keep the stream's numbers, as lfstream decode's do
+                self.writer = FrameWriter(plan["target"], plan["count"], fps=plan["fps"], overwrite=self.overwrite,
+                                          first_index=plan["first"])
+            for frame in frames:
                 self.writer.write(frame)
         except LFStreamError as exc:
             self.error = exc
@@ -292,10 +313,17 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
         raise LFValueError(f"group_frames: a positive integer, got {group_frames!r}")
     if engine == "ray":
         _ray()  # fail early with the install hint
+    if mode == "decode":
+        output_format = _decode_suffix(output_format)
+    read = read or ReadOptions()
+    if mode == "decode" and (read.angular or read.crop or read.grid or read.flip_u or read.flip_v
+                             or read.allow_missing):
+        # (they were ignored)
+        raise LFValueError("read options (angular, views crop, grid, flips, allow_missing) shape light fields read "
+                           "for an encode; a decode takes first_frame and max_frames")
     t0 = time.perf_counter()
     created = not Path(output).exists()
     out_dir = prepare_output_dir(output, overwrite=True)
-    read = read or ReadOptions()
     report = BatchReport(engine=engine, workers=1, mode=mode)
     plans: dict[int, dict] = {}
     taken: set[str] = set()
@@ -328,9 +356,15 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
         header, header_bytes, packets, raw = split_stream_bytes(data)
         if not packets:
             raise LFValueError(f"{path}: stream holds no frames")
-        plans[i] = {"target": target, "fps": header.fps, "count": len(packets)}
+        # a frame range (--first-frame, --max-frames; they were ignored here): the groups
+        # that hold it, each decoded from its self-contained start, the frames outside it
+        # dropped as they are written
+        first = read.first_frame
+        stop = first + frames_in_range(len(packets), first, read.max_frames, path)
+        plans[i] = {"target": target, "fps": header.fps, "count": stop - first, "first": first, "stop": stop}
         for a, b in decode_groups(packets, group_frames):
-            yield _Job(i, decode_group, (header_bytes, raw[a:b], a, decode))
+            if b > first and a < stop:
+                yield _Job(i, decode_group, (header_bytes, raw[a:b], a, decode))
 
     def all_jobs() -> Iterator[_Job]:
         for i, src in enumerate(inputs):
