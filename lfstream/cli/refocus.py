@@ -18,10 +18,21 @@ HELP = "render a focal stack (PNG per plane, MP4 and GIF focal sweep)"
 METHODS = ("sas", "fourier", "refnet")
 
 
+def parse_alphas(text: str) -> list[float]:
+    """``seed`` (the seed's sixteen alphas, the default; as ``stream --alphas seed``) or a
+    comma list of alphas."""
+    if text.strip().lower() == "seed":
+        from lfstream.optics import SEED_ALPHAS
+
+        return list(SEED_ALPHAS)
+    return parse_float_list(text)
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path)
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; must be empty)")
-    p.add_argument("--alphas", type=parse_float_list, help="refocus parameters alpha (default 0.125,0.25,...,2.0)")
+    p.add_argument("--alphas", type=parse_alphas, metavar="seed|A,B,...",
+                   help="refocus parameters alpha (default: seed, the seed's 0.125,0.25,...,2.0)")
     p.add_argument("--slopes", type=parse_float_list, help="instead of alphas: shifts in pixels per view step")
     p.add_argument("--slope-range", nargs=3, type=float, metavar=("LO", "HI", "N"),
                    help="N slopes evenly spaced from LO to HI (a focus range in disparity units)")

@@ -155,6 +155,23 @@ def test_refocus_single_frame_writes_sweeps(capsys, tmp_path, rng):
     assert len(list(iter_video_frames(tmp_path / "o" / "sweep.mp4"))) == 5
 
 
+def test_refocus_alphas_seed_is_the_default_as_in_stream(capsys, tmp_path, rng):
+    """``refocus --alphas seed`` (``stream --alphas`` takes it; refocus refused it): the
+    seed's sixteen alphas, the same planes as the default."""
+    from lfstream import write_lf
+    from lfstream.optics import SEED_ALPHAS, slope_from_alpha
+
+    write_lf(tmp_path / "lf.npy", random_lf(rng, (3, 3, 16, 20, 3)))
+    slopes = []
+    for name, extra in (("seed", ["--alphas", "seed"]), ("default", [])):
+        code, _, _ = run(capsys, "refocus", tmp_path / "lf.npy", "-o", tmp_path / name, "--no-viewer", *extra)
+        assert code == 0
+        slopes.append([p["slope"] for p in json.loads((tmp_path / name / "planes.json").read_text())["planes"]])
+    assert slopes[0] == slopes[1] == pytest.approx([slope_from_alpha(a) for a in SEED_ALPHAS], abs=1e-5)
+    code, _, err = run(capsys, "refocus", tmp_path / "lf.npy", "-o", tmp_path / "bad", "--alphas", "seeds")
+    assert code == 2 and "--alphas" in err
+
+
 def test_demo_runs_and_never_overwrites(capsys, tmp_path):
     out = tmp_path / "demo"
     code, out_text, _ = run(capsys, "demo", "-o", out, "--size", "48x64", "--json")
