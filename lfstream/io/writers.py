@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.errors import LFFileError, LFValueError
+from lfstream.errors import LFFileError, LFShapeError, LFValueError
 from lfstream.io._fs import atomic_write_bytes, check_new_file, temp_sibling
 from lfstream.io.images import IMAGE_EXTS, write_image
 from lfstream.io.video import VIDEO_EXTS, VideoWriter, grid_metadata, write_video
@@ -45,6 +45,13 @@ def write_lf(
     lf = np.asarray(lf)
     check_lf(lf)
     ext = path.suffix.lower()
+    if disparity is not None:
+        # every view's map, or the centre view's (per frame of a video); another shape was
+        # written as it came and read back beside the light field it does not describe
+        shape = np.shape(disparity)
+        if shape not in (lf.shape[:-1], lf.shape[:-5] + lf.shape[-3:-1]):
+            raise LFShapeError(f"{path}: disparity {shape} matches neither the views {lf.shape[:-1]} nor the centre "
+                               f"view {lf.shape[:-5] + lf.shape[-3:-1]}")
     if path.exists() and (path.is_file() or any(path.iterdir())):
         check_new_file(path, overwrite)
     if ext == ".npy":

@@ -75,6 +75,19 @@ def test_array_files_take_16_bit_samples_to_8_bits_and_refuse_other_integers(tmp
             read_lf(tmp_path / "bad.npy")
 
 
+def test_a_disparity_that_does_not_describe_the_light_field_is_refused(tmp_path, rng):
+    """write_lf's disparity: every view's map or the centre view's, per frame of a video
+    (a (3, 3) map beside a 2-frame 5x5 video was written and read back as it came)."""
+    video = random_lf(rng, (2, 3, 3, 6, 7, 3))
+    for good in ((2, 3, 3, 6, 7), (2, 6, 7)):
+        write_lf(tmp_path / f"ok{len(good)}.npz", video, disparity=np.zeros(good, np.float32))
+        assert load_lf(tmp_path / f"ok{len(good)}.npz").disparity.shape == good
+    write_lf(tmp_path / "still.npz", video[0], disparity=np.zeros((6, 7), np.float32))
+    with pytest.raises(LFShapeError, match=r"bad.npz: disparity \(3, 3\) matches neither"):
+        write_lf(tmp_path / "bad.npz", video, disparity=np.zeros((3, 3), np.float32))
+    assert not (tmp_path / "bad.npz").exists()
+
+
 def test_existing_output_is_not_overwritten(tmp_path, rng):
     lf = random_lf(rng)
     write_lf(tmp_path / "a.npy", lf)
