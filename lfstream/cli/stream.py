@@ -12,6 +12,9 @@ from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.residual import RESIDUAL_MODES
 from lfstream.stream.config import TRANSPORTS
 
+#: Frames of the built-in clip ``lfstream stream`` streams without an input (``--frames``).
+BUILTIN_FRAMES = 12
+
 HELP = "stream an LF video (default: the built-in synthetic clip) through the whole pipeline"
 
 
@@ -38,7 +41,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="send JPEG-Hance strength maps with the JPEG centre views (as encode --hance-map: the "
                    "encoder measures the map on key frames, about 0.15 s each on a 2-core CPU); --hance auto then "
                    "runs the network, blended by them")
-    p.add_argument("--frames", type=int_in((1, 1 << 20)), default=12, help="frames of the built-in clip")
+    p.add_argument("--frames", type=int_in((1, 1 << 20)), default=None,
+                   help=f"frames of the built-in clip (default {BUILTIN_FRAMES}; an input file takes --max-frames)")
     _pipeline.add_pipeline_options(p)
     add_read_options(p)
 
@@ -66,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
                 if args.first_frame or args.max_frames is not None:
                     raise LFValueError("--first-frame, --max-frames: they choose the frames of an input file; the "
                                        "built-in clip takes --frames N")
+                args.frames = BUILTIN_FRAMES if args.frames is None else args.frames
                 # rendered into its cache while the kernels load, where it is not there yet
                 # (and not so long that the wait would outlast them: PRERENDER_MAX_FRAMES)
                 ahead = args.frames <= PRERENDER_MAX_FRAMES
@@ -73,6 +78,9 @@ def run(args: argparse.Namespace) -> int:
                                 prepare=(lambda stop: render_builtin_clip(frames=args.frames, stop=stop)) if ahead
                                 else None)
             else:
+                if args.frames is not None:  # (it was ignored: every frame of the input streamed)
+                    raise LFValueError("--frames: the built-in clip's length; an input file's frames are chosen "
+                                       "by --max-frames N (and --first-frame K)")
                 source = file_source(args.input, read_options(args))
             cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp,
                                             depth_hint=not args.no_depth_hint, preset=args.preset,

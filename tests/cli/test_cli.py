@@ -850,6 +850,9 @@ def test_a_frame_range_of_a_video_through_the_commands(capsys, tmp_path):
     assert not (tmp_path / "late.avi").exists()
     code, _, err = run(capsys, "stream", "-o", tmp_path / "out", "--first-frame", "2")
     assert code == 2 and "--first-frame" in err and "--frames" in err and not (tmp_path / "out").exists()
+    # and the other way round: --frames with an input file (it was ignored: every frame streamed)
+    code, _, err = run(capsys, "stream", tmp_path / "src.avi", "-o", tmp_path / "out", "--frames", "1")
+    assert code == 2 and "--max-frames" in err and not (tmp_path / "out").exists()
 
 
 def test_a_frame_range_keeps_the_source_frame_numbers_in_every_output_of_a_run(capsys, tmp_path):
