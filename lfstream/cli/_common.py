@@ -130,6 +130,8 @@ class InputFrames:
         whole: the ``(T, U, V, H, W, C)`` array where the input was read whole, else ``None``.
         present: ``(U, V)`` mask of the views that exist, ``None`` for all.
         fps: the input's frame rate, if it records one.
+        disparity: the input's ground-truth disparity where it was read whole with one
+            (a ``.npz`` of :func:`lfstream.io.write_lf`'s, the range's frames), else ``None``.
     """
 
     first: np.ndarray
@@ -138,6 +140,7 @@ class InputFrames:
     whole: np.ndarray | None
     present: np.ndarray | None
     fps: float | None
+    disparity: np.ndarray | None = None
 
 
 def read_input(args: argparse.Namespace, whole: bool = False, count_frames: bool = False) -> InputFrames:
@@ -163,7 +166,7 @@ def read_input(args: argparse.Namespace, whole: bool = False, count_frames: bool
     loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
     check_lf(loaded.lf)
     lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
-    return InputFrames(lf[0], lf, len(lf), lf, loaded.present, loaded.fps)
+    return InputFrames(lf[0], lf, len(lf), lf, loaded.present, loaded.fps, loaded.disparity)
 
 
 @contextmanager

@@ -48,13 +48,19 @@ def run(args: argparse.Namespace) -> int:
     # a float light field read whole goes to a .npy or .npz as it is (frame by frame, the
     # writers take 8 bits)
     keeps_dtype = ext in (".npy", ".npz") and source.whole is not None and source.whole.dtype != np.uint8
+    # an input's ground-truth disparity (a .npz of write_lf's) goes into a .npz output; the
+    # other formats hold none (it was dropped from a .npz too)
+    disparity = source.disparity if ext == ".npz" else None
+    if disparity is not None and source.whole is not None and disparity.ndim in (2, 4):
+        disparity = disparity[None]  # a still read as a one-frame video: its map with it
     if keeps_dtype:
         lf = source.whole if source.whole is not None else np.stack(list(source.frames))
-        write_lf(args.output, lf, fps=fps, overwrite=args.overwrite)
+        write_lf(args.output, lf, fps=fps, overwrite=args.overwrite, disparity=disparity)
         done = len(lf)
     else:
         writer = FrameWriter(args.output, source.count, fps=fps, lossless=not args.lossy, overwrite=args.overwrite,
-                             first_index=args.first_frame)  # a folder's frames keep the source's numbers
+                             first_index=args.first_frame,  # a folder's frames keep the source's numbers
+                             disparity=disparity)
         damage = None
         try:
             try:
@@ -80,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - t0
     first = source.first
     result = {"input": str(args.input), "output": str(args.output), "frames": done, "views": list(first.shape[:2]),
-              "size": list(first.shape[2:4]), "seconds": seconds, "interrupted": interrupted}
+              "size": list(first.shape[2:4]), "seconds": seconds, "interrupted": interrupted,
+              "disparity": disparity is not None}
     emit(args, result, lambda r: f"{done} frame(s) of {r['views'][0]}x{r['views'][1]} views, {r['size'][0]}x{r['size'][1]}, "
          f"in {seconds:.2f} s -> {args.output}" + (" (interrupted)" if interrupted else ""))
     return 130 if interrupted else 0

@@ -309,7 +309,8 @@ def _read_array_file(path: Path, opts: ReadOptions = ReadOptions()) -> LoadedLF:
     except LFShapeError as exc:
         raise LFFormatError(str(exc)) from exc
     if lf.ndim == 6:
-        if disparity is not None and disparity.ndim == 5 and len(disparity) == len(lf):
+        if disparity is not None and disparity.ndim in (3, 5) and len(disparity) == len(lf):
+            # a map per frame, every view's or the centre view's: the range's
             disparity = _frame_range(disparity, opts, path)
         lf = _frame_range(lf, opts, path)
     if isinstance(lf, np.memmap) or (isinstance(lf.base, np.ndarray) and lf.size < lf.base.size):

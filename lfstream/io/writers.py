@@ -153,17 +153,22 @@ class FrameWriter:
         fps, lossless, image_ext: as :func:`write_lf`.
         first_index: the number of the first frame's folder (``frame_NNNNNN/``), the next
             ones counting on: a range of a video keeps its source's frame numbers.
+        disparity: a ``.npz``'s ground-truth disparity (:class:`NpzWriter`); refused for the
+            formats that hold none.
     """
 
     def __init__(self, path: str | os.PathLike, count: int | None = None, *, fps: float = 30.0, lossless: bool = True,
-                 overwrite: bool = False, image_ext: str = ".png", first_index: int = 0) -> None:
+                 overwrite: bool = False, image_ext: str = ".png", first_index: int = 0,
+                 disparity: np.ndarray | None = None) -> None:
         self.path = Path(path)
         self._ext = self.path.suffix.lower()
         if self._ext in IMAGE_EXTS or self._ext in NOT_LF_EXTS:
             raise LFValueError(f"{self.path}: cannot write a light field frame by frame as {self._ext}; use .npy, "
                                ".npz, a video or a folder")
         self._array = NpyWriter(self.path, count) if self._ext == ".npy" else (
-            NpzWriter(self.path) if self._ext == ".npz" else None)
+            NpzWriter(self.path, disparity) if self._ext == ".npz" else None)
+        if disparity is not None and self._ext != ".npz":
+            raise LFValueError(f"{self.path}: a {self._ext or 'folder'} holds no disparity; write a .npz")
         if self.path.exists() and (self.path.is_file() or any(self.path.iterdir())):
             check_new_file(self.path, overwrite)
         self._fps, self._lossless, self._image_ext = fps, lossless, image_ext
@@ -234,10 +239,13 @@ class NpzWriter:
     frames written; then renamed into place. Memory holds a frame and a chunk, not the
     video (``lfstream decode -o x.npz`` held every decoded frame); the disk holds the raw
     frames meanwhile (what a ``.npy`` of them would take). The caller checks that ``path``
-    may be written (:func:`lfstream.io._fs.check_new_file`)."""
+    may be written (:func:`lfstream.io._fs.check_new_file`). ``disparity``: written beside
+    the frames as the member ``disparity.npy`` (as :func:`write_lf`'s), cut to the frames
+    written where it has a map per frame (``(T, ...)``, an output closed part way)."""
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike, disparity: np.ndarray | None = None) -> None:
         self.path = Path(path)
+        self.disparity = None if disparity is None else np.asarray(disparity, np.float32)
         self._raw = temp_sibling(self.path, "frames")
         self._fh = None
         self._frame: tuple[tuple[int, ...], np.dtype] | None = None
@@ -284,6 +292,13 @@ class NpzWriter:
                 np.lib.format.write_array_header_1_0(member, header)
                 while chunk := raw.read(NPZ_COPY_CHUNK):
                     member.write(chunk)
+            if self.disparity is not None:
+                d = self.disparity
+                if d.ndim in (3, 5) and len(d) > self.frames:  # a map per frame: those written
+                    d = d[: self.frames]
+                with zipfile.ZipFile(tmp, "a", compression=zipfile.ZIP_DEFLATED, allowZip64=True) as archive, \
+                        archive.open("disparity.npy", "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, np.ascontiguousarray(d))
             os.replace(tmp, self.path)
         except OSError as exc:
             tmp.unlink(missing_ok=True)

@@ -908,6 +908,26 @@ def test_a_float_input_streams_with_the_metrics_of_its_8_bit_levels(capsys, tmp_
     assert results[1]["mssim"] == pytest.approx(results[0]["mssim"], abs=1e-5)
 
 
+def test_convert_to_npz_keeps_the_ground_truth_disparity_of_the_frames_it_writes(capsys, tmp_path):
+    """A .npz with ground-truth disparity (lfstream synth's) converted to a .npz: the
+    disparity goes with the frames, a range's maps with the range's frames, every view's or
+    the centre view's (it was dropped); the JSON says so; a format holding none says not."""
+    import lfstream
+
+    clip = synth_clip(3, 3, (24, 32), seed=5)
+    lfstream.write_lf(tmp_path / "views.npz", clip.lf, disparity=clip.disparity)
+    centre = clip.disparity[:, 1, 1]
+    lfstream.write_lf(tmp_path / "centre.npz", clip.lf, disparity=centre)
+    for src, truth in (("views.npz", clip.disparity), ("centre.npz", centre)):
+        code, out, _ = run(capsys, "convert", tmp_path / src, tmp_path / f"cut-{src}", "--first-frame", "1", "--json")
+        assert code == 0 and json.loads(out)["disparity"] is True
+        loaded = lfstream.load_lf(tmp_path / f"cut-{src}")
+        np.testing.assert_array_equal(loaded.lf, clip.lf[1:])
+        np.testing.assert_array_equal(loaded.disparity, truth[1:])
+    code, out, _ = run(capsys, "convert", tmp_path / "views.npz", tmp_path / "plain.npy", "--json")
+    assert code == 0 and json.loads(out)["disparity"] is False
+
+
 def test_a_stream_of_an_input_cut_short_ends_there_with_its_outputs(capsys, tmp_path):
     """An input damaged after its first frames (an .lfs cut short) ends the stream there:
     the frames before it go through every stage, the outputs and summary.json are written

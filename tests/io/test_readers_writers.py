@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from lfstream import LFStreamError, load_lf, read_lf, read_pfm, write_lf, write_pfm
-from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError
+from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError, LFValueError
 from lfstream.io import write_image, write_video
 from lfstream.lightfield import to_mosaic, to_sensor
 from tests.conftest import random_lf, shared
@@ -86,6 +86,16 @@ def test_a_disparity_that_does_not_describe_the_light_field_is_refused(tmp_path,
     with pytest.raises(LFShapeError, match=r"bad.npz: disparity \(3, 3\) matches neither"):
         write_lf(tmp_path / "bad.npz", video, disparity=np.zeros((3, 3), np.float32))
     assert not (tmp_path / "bad.npz").exists()
+    from lfstream.io import FrameWriter
+
+    with pytest.raises(LFValueError, match="holds no disparity; write a .npz"):
+        FrameWriter(tmp_path / "x.avi", disparity=np.zeros((2, 6, 7), np.float32))
+    # frame by frame into a .npz: the maps of the frames written (closed part way: two of three)
+    with FrameWriter(tmp_path / "part.npz", disparity=np.arange(3 * 6 * 7, dtype=np.float32).reshape(3, 6, 7)) as w:
+        w.write(video[0])
+        w.write(video[1])
+    part = load_lf(tmp_path / "part.npz")
+    assert part.lf.shape[0] == 2 and part.disparity.shape == (2, 6, 7) and part.disparity[1, 0, 0] == 42
 
 
 def test_existing_output_is_not_overwritten(tmp_path, rng):
