@@ -405,18 +405,13 @@ def dof_image(lf: ArrayT, weights: np.ndarray | torch.Tensor | None = None) -> A
 
 def as_float(x: ArrayT) -> ArrayT:
     """uint8 -> float32 in ``[0, 1]``; float inputs are returned as float32 (torch keeps its
-    float dtype), other integer types are rejected."""
+    float dtype), other integer types are rejected (:func:`check_samples`)."""
+    check_samples(x)
     if is_tensor(x):
-        if x.dtype == sys.modules["torch"].uint8:
-            return x.float() / 255.0
-        if x.is_floating_point():
-            return x
-        raise LFValueError(f"expected uint8 or float data, got {x.dtype}")
+        return x.float() / 255.0 if x.dtype == sys.modules["torch"].uint8 else x
     if x.dtype == np.uint8:
         return x.astype(np.float32) / np.float32(255.0)
-    if np.issubdtype(x.dtype, np.floating):
-        return x.astype(np.float32, copy=False)
-    raise LFValueError(f"expected uint8 or float data, got {x.dtype}")
+    return x.astype(np.float32, copy=False)
 
 
 def to_network_input(x: np.ndarray | torch.Tensor, device: str | torch.device = "cpu") -> torch.Tensor:
@@ -434,18 +429,16 @@ def to_network_input(x: np.ndarray | torch.Tensor, device: str | torch.device = 
 
 
 def to_uint8(x: ArrayT) -> ArrayT:
-    """Float in ``[0, 1]`` -> uint8 with rounding and clipping; NaN maps to 0."""
+    """Float in ``[0, 1]`` -> uint8 with rounding and clipping; NaN maps to 0. Other integer
+    types are rejected (:func:`check_samples`)."""
+    check_samples(x)
     if is_tensor(x):
         torch = sys.modules["torch"]
         if x.dtype == torch.uint8:
             return x
-        if not x.is_floating_point():
-            raise LFValueError(f"expected uint8 or float samples in [0, 1], got {x.dtype}")
         return torch.nan_to_num(x.float() * 255.0 + 0.5, nan=0.0).clamp_(0, 255).to(torch.uint8)
     if x.dtype == np.uint8:
         return x
-    if not np.issubdtype(x.dtype, np.floating):  # another integer type's scale is a guess
-        raise LFValueError(f"expected uint8 or float samples in [0, 1], got {x.dtype}")
     y = np.nan_to_num(np.asarray(x, np.float32) * np.float32(255.0) + np.float32(0.5), nan=0.0)
     return np.clip(y, 0, 255).astype(np.uint8)
 

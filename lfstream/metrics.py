@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from lfstream.errors import LFShapeError, LFValueError
-from lfstream.lightfield import dof_image, is_tensor, read_only
+from lfstream.lightfield import check_samples, dof_image, is_tensor, read_only
 
 if TYPE_CHECKING:
     import torch
@@ -72,8 +72,7 @@ def _pair(
     if ty.device != tx.device:
         ty = ty.to(tx.device)
     for t in (tx, ty):
-        if not (t.is_floating_point() or t.dtype == torch.uint8):
-            raise LFValueError(f"metrics: expected uint8 or float data, got {t.dtype}")
+        check_samples(t, "metrics")
     if (tx.dtype == torch.uint8) != (ty.dtype == torch.uint8) and data_range is None:
         # 8-bit levels against floats in [0, 1]: one scale (the convention's), not the raw
         # samples (a light field against itself divided by 255 measured 4.8 dB)
@@ -99,8 +98,7 @@ def _numpy_pair(x: np.ndarray, y: np.ndarray, data_range: float | None) -> tuple
     if x.ndim < 3:
         raise LFShapeError(f"metrics: expected (..., H, W, C), got shape {x.shape}")
     for a in (x, y):
-        if not (a.dtype == np.uint8 or np.issubdtype(a.dtype, np.floating)):
-            raise LFValueError(f"metrics: expected uint8 or float data, got {a.dtype}")
+        check_samples(a, "metrics")
     if (x.dtype == np.uint8) != (y.dtype == np.uint8) and data_range is None:
         x, y = (a.astype(np.float32) / np.float32(255.0) if a.dtype == np.uint8 else a for a in (x, y))
     rng = float(data_range) if data_range is not None else (255.0 if x.dtype == np.uint8 else 1.0)

@@ -183,6 +183,6 @@ def test_to_uint8_refuses_other_integer_samples():
     import torch
 
     for bad in (np.arange(3, dtype=np.int64), np.ones(3, np.uint16), np.ones(3, bool), torch.arange(3)):
-        with pytest.raises(LFValueError, match="expected uint8 or float samples"):
+        with pytest.raises(LFValueError, match="samples; expected uint8, or float in"):
             to_uint8(bad)
     assert to_uint8(torch.tensor([0.0, 0.5, 1.0])).tolist() == [0, 128, 255]

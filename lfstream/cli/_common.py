@@ -131,7 +131,8 @@ class InputFrames:
         present: ``(U, V)`` mask of the views that exist, ``None`` for all.
         fps: the input's frame rate, if it records one.
         disparity: the input's ground-truth disparity where it was read whole with one
-            (a ``.npz`` of :func:`lfstream.io.write_lf`'s, the range's frames), else ``None``.
+            (a ``.npz`` of :func:`lfstream.io.write_lf`'s, the range's frames; a still's with
+            a leading frame axis, as ``whole`` has), else ``None``.
     """
 
     first: np.ndarray
@@ -165,8 +166,11 @@ def read_input(args: argparse.Namespace, whole: bool = False, count_frames: bool
         return InputFrames(first, itertools.chain([first], video.frames), video.count, None, video.present, video.fps)
     loaded = load_from_args(args)  # with --allow-missing, only the centre view must exist
     check_lf(loaded.lf)
-    lf = loaded.lf if loaded.lf.ndim == 6 else loaded.lf[None]
-    return InputFrames(lf[0], lf, len(lf), lf, loaded.present, loaded.fps, loaded.disparity)
+    still = loaded.lf.ndim == 5
+    lf = loaded.lf[None] if still else loaded.lf
+    disparity = loaded.disparity  # a still's map goes with it into the one-frame video
+    disparity = disparity[None] if still and disparity is not None else disparity
+    return InputFrames(lf[0], lf, len(lf), lf, loaded.present, loaded.fps, disparity)
 
 
 @contextmanager

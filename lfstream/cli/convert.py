@@ -51,8 +51,6 @@ def run(args: argparse.Namespace) -> int:
     # an input's ground-truth disparity (a .npz of write_lf's) goes into a .npz output; the
     # other formats hold none (it was dropped from a .npz too)
     disparity = source.disparity if ext == ".npz" else None
-    if disparity is not None and source.whole is not None and disparity.ndim in (2, 4):
-        disparity = disparity[None]  # a still read as a one-frame video: its map with it
     if keeps_dtype:
         lf = source.whole if source.whole is not None else np.stack(list(source.frames))
         write_lf(args.output, lf, fps=fps, overwrite=args.overwrite, disparity=disparity)

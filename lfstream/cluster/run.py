@@ -313,14 +313,13 @@ def batch(inputs: Sequence[str | os.PathLike], output: str | os.PathLike, *, mod
         raise LFValueError(f"group_frames: a positive integer, got {group_frames!r}")
     if engine == "ray":
         _ray()  # fail early with the install hint
+    read = read or ReadOptions()
     if mode == "decode":
         output_format = _decode_suffix(output_format)
-    read = read or ReadOptions()
-    if mode == "decode" and (read.angular or read.crop or read.grid or read.flip_u or read.flip_v
-                             or read.allow_missing):
-        # (they were ignored)
-        raise LFValueError("read options (angular, views crop, grid, flips, allow_missing) shape light fields read "
-                           "for an encode; a decode takes first_frame and max_frames")
+        if read.angular or read.crop or read.grid or read.flip_u or read.flip_v or read.allow_missing:
+            # (they were ignored)
+            raise LFValueError("read options (angular, views crop, grid, flips, allow_missing) shape light fields "
+                               "read for an encode; a decode takes first_frame and max_frames")
     t0 = time.perf_counter()
     created = not Path(output).exists()
     out_dir = prepare_output_dir(output, overwrite=True)

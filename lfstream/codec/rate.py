@@ -646,11 +646,10 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     from lfstream.codec.encoder import PRESETS, Encoder, preset_coding
     from lfstream.metrics import bpp
 
-    try:  # a string or None is the same one line (np.isfinite raised a TypeError on it)
-        finite = bool(np.isfinite(float(target_bpp))) and not isinstance(target_bpp, bool)
-    except (TypeError, ValueError):
-        finite = False
-    if not (finite and target_bpp > 0):
+    # a number only: a string or None is the same one line (np.isfinite raised a TypeError
+    # on it, and a numeric string got past a float() check to fail at the comparison)
+    number = isinstance(target_bpp, (int, float, np.integer, np.floating)) and not isinstance(target_bpp, bool)
+    if not (number and np.isfinite(target_bpp) and target_bpp > 0):
         raise LFValueError(f"bpp: a positive target in bits per pixel, got {target_bpp!r}")
     if search is not None and search not in SEARCHES:
         raise LFValueError(f"search: one of {', '.join(SEARCHES)}, got {search!r}")

@@ -135,7 +135,8 @@ def single_numba_thread() -> Iterator[None]:
     count is per thread: other threads keep theirs; restored afterwards). For work run beside
     other work on a 2-core machine: two calls that would each spread over both cores then
     take one core each instead of taking turns on both (an OpenMP team waits for its slowest
-    thread)."""
+    thread). Not on every thread of a piece of work at once: a team of two left alone in the
+    process has libgomp spin its idle worker through the others' time (see :func:`beside`)."""
     import numba
 
     previous = numba.get_num_threads()

@@ -926,6 +926,12 @@ def test_convert_to_npz_keeps_the_ground_truth_disparity_of_the_frames_it_writes
         np.testing.assert_array_equal(loaded.disparity, truth[1:])
     code, out, _ = run(capsys, "convert", tmp_path / "views.npz", tmp_path / "plain.npy", "--json")
     assert code == 0 and json.loads(out)["disparity"] is False
+    # a still is written as a one-frame video, its map with a frame axis
+    lfstream.write_lf(tmp_path / "still.npz", clip.lf[0], disparity=centre[0])
+    assert run(capsys, "convert", tmp_path / "still.npz", tmp_path / "still-out.npz")[0] == 0
+    still = lfstream.load_lf(tmp_path / "still-out.npz")
+    assert still.lf.shape == (1, *clip.lf.shape[1:]) and still.disparity.shape == (1, *centre.shape[1:])
+    np.testing.assert_array_equal(still.disparity[0], centre[0])
 
 
 def test_a_stream_of_an_input_cut_short_ends_there_with_its_outputs(capsys, tmp_path):

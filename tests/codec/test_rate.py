@@ -461,3 +461,12 @@ def test_rate_control_refuses_what_it_chooses_itself_in_one_place(capsys, tmp_pa
         assert main(["encode", str(missing), "-o", str(tmp_path / "x.lfs"), "--bpp", "0.05", *flags]) == 2
         err = capsys.readouterr().err
         assert f"{flag}: rate control (--bpp)" in err and "not-there" not in err
+
+
+@pytest.mark.parametrize("bad", ["x", "0.1", True, float("nan"), -1, 0.0, [0.1]])
+def test_a_bpp_target_that_is_not_a_positive_number_is_one_line(bad):
+    """A string (numeric or not), a bool, NaN, a list or a target of 0 or less: the bpp line,
+    not a TypeError from the checks (np.isfinite raised on "x"; "0.1" failed at the comparison)."""
+    lf = np.zeros((3, 3, 16, 16, 3), np.uint8)
+    with pytest.raises(LFValueError, match="bpp: a positive target in bits per pixel"):
+        lfstream.encode(lf, bpp=bad)
