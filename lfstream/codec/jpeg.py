@@ -171,7 +171,36 @@ def deblock_jpeg(img: np.ndarray, scale: float, post_filter: PostFilter = POST_F
     if post_filter.diameter <= IPP_BILATERAL_MAX_DIAMETER:
         return cv2.bilateralFilter(*args)
     with _without_ipp():
-        return cv2.bilateralFilter(*args)
+        return _bilateral_in_pieces(*args)
+
+
+#: OpenCV's own bilateral filter splits an image into ``pixels / 2**16`` stripes of rows
+#: (rounded) for its threads: a 375 x 540 view is 3 stripes, which two threads finish in the
+#: time of two (1.85 ms against 2.76 on one thread, not 1.4).
+_CV_STRIPE_PIXELS = 1 << 16
+
+
+def _bilateral_in_pieces(img: np.ndarray, diameter: int, sigma_color: float, sigma_space: float) -> np.ndarray:
+    """``cv2.bilateralFilter`` of ``img`` (OpenCV's own code), called once per piece of rows
+    of about ``threads * 2**16`` pixels, so each call is as many stripes as OpenCV has
+    threads; each piece with ``diameter // 2`` context rows of its neighbours (a piece at the
+    image's edge keeps that edge's border): the same bytes as one call. 375 x 540, 7 x 7, two
+    Zen 5 threads: 1.45 ms against 1.85 as one call.
+
+    Shape:
+        - img: ``(H, W, 3)`` uint8, C-contiguous; output the same
+    """
+    h, w = img.shape[:2]
+    pieces = min(h, int(round(h * w / (max(1, cv2.getNumThreads()) * _CV_STRIPE_PIXELS))))
+    if pieces <= 1:
+        return cv2.bilateralFilter(img, diameter, sigma_color, sigma_space)
+    pad = diameter // 2
+    out = np.empty_like(img)
+    cuts = [round(k * h / pieces) for k in range(pieces + 1)]
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        a, b = max(0, lo - pad), min(h, hi + pad)
+        out[lo:hi] = cv2.bilateralFilter(img[a:b], diameter, sigma_color, sigma_space)[lo - a:hi - a]
+    return out
 
 
 def _names_post_filter(data: bytes) -> bool:

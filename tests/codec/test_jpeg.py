@@ -288,3 +288,20 @@ def test_wide_post_filters_run_without_ipp_on_this_thread_only_and_give_the_same
                 cv2.ipp.setUseIPP(was)
             np.testing.assert_array_equal(got, with_ipp)
     assert seen and all(s == cv2.ipp.useIPP() for s in seen)
+
+
+@pytest.mark.parametrize("shape", [(75, 101), (64, 9), (5, 40), (1, 33)])
+@pytest.mark.parametrize("stripe_pixels", [1, 200, 1 << 16])
+def test_the_wide_post_filter_in_pieces_of_rows_gives_one_calls_bytes(monkeypatch, shape, stripe_pixels):
+    """The 7 x 7 filter runs as pieces of rows sized to OpenCV's thread stripes, each with its
+    neighbours' context rows: exactly one call's output, whatever the pieces (a piece a row
+    high included)."""
+    from lfstream.codec import jpeg
+
+    rng = np.random.default_rng(7)
+    img = cv2.GaussianBlur(rng.integers(0, 256, (*shape, 3), dtype=np.uint8), (3, 3), 0)
+    monkeypatch.setattr(jpeg, "_CV_STRIPE_PIXELS", stripe_pixels)
+    with jpeg._without_ipp():
+        for sigma in (0.9, 3.6, 20.0):
+            one = cv2.bilateralFilter(img, 7, sigma, 3.0)
+            np.testing.assert_array_equal(jpeg._bilateral_in_pieces(img, 7, sigma, 3.0), one)
