@@ -98,6 +98,15 @@ class HintOptions:
             2.5 dB of decoded MPSNR against 1/2, which costs about four times the time.
         step: candidate spacing, as the change of the outermost view's shift in pixels of
             the working resolution (smaller: finer, slower); the parabolic fit refines it.
+        min_spacing: the candidates' spacing is at least this many pixels of the full view
+            per view step (0: ``step`` alone). On a 7x7 grid ``step`` alone spaces them 1/6
+            px apart; a quarter pixel (a third fewer candidates) measured, at q50, one frame,
+            two Zen 5 cores: encode 8-9 % faster on the real 7x7 captures, decoded MPSNR
+            within 0.02 dB of the finer sweep on them (synthetic clip +0.04 dB), MSSIM within
+            0.0001, and on the ground truth of 14 synthetic 7x7x375x540 scenes MSEx100
+            28.63 -> 28.19, BadPix(0.07) 0.406 -> 0.356. It does not bind on 5x5 or 3x3 grids
+            (1/4 and 1/2 px already), where wider spacing lost: seahorse (5x5) -0.09 dB at
+            3/8 px, -0.21 dB on a 128x160 crop.
         box_radius: cost aggregation window radius at the working resolution.
         coarse_scale: resolution divisor of the range-finding pass.
         search_limit: largest ``|disparity|`` (px per view step) the range pass considers.
@@ -119,6 +128,7 @@ class HintOptions:
     hint_scale: int = 4
     work_scale: int = 2
     step: float = 0.25
+    min_spacing: float = 0.25
     box_radius: int = 2
     coarse_scale: int = 8
     search_limit: float = 16.0
@@ -138,6 +148,8 @@ class HintOptions:
             raise LFValueError("hint options: step in [0.01, 2], search_limit in (0, 64], key_interval >= 1")
         if self.median not in (1, 3, 5):
             raise LFValueError(f"hint options: median 1, 3 or 5, got {self.median!r}")
+        if not (np.isfinite(self.min_spacing) and 0 <= self.min_spacing <= 4):
+            raise LFValueError(f"hint options: min_spacing in [0, 4] px, got {self.min_spacing!r}")
         if not (np.isfinite(self.precision) and 0 <= self.precision <= 4):
             raise LFValueError(f"hint options: precision in [0, 4] px, got {self.precision!r}")
         if self.geometry not in GEOMETRY_MODES:
@@ -273,7 +285,7 @@ def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale:
     from lfstream.codec._kernels import sweep_cost, winner_subpixel
 
     reach = float(np.abs(offsets).max()) or 1.0
-    step = options.step * scale / reach  # candidate spacing in full-view px per view step
+    step = max(options.step * scale / reach, options.min_spacing)  # candidate spacing in full-view px per view step
     n = int(np.ceil((hi - lo) / step)) + 1
     if n > max_candidates:
         n, step = max_candidates, (hi - lo) / (max_candidates - 1)

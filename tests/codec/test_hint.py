@@ -231,9 +231,37 @@ def test_precision_bounds_the_displacement_error_at_the_outermost_view(rng, reac
 
 
 def test_median_and_precision_options_are_validated():
-    for bad in (dict(median=2), dict(median=7), dict(precision=-0.1), dict(precision=float("nan"))):
+    for bad in (dict(median=2), dict(median=7), dict(precision=-0.1), dict(precision=float("nan")),
+                dict(min_spacing=-0.1), dict(min_spacing=float("inf"))):
         with pytest.raises(LFValueError):
             H.HintOptions(**bad).validate()
+
+
+@pytest.mark.parametrize("views, spacing", [(7, 0.25), (5, 0.25), (3, 0.5)])
+def test_the_working_sweeps_candidates_are_at_least_min_spacing_apart(monkeypatch, views, spacing):
+    """Candidates step the outermost view's shift by ``step`` working pixels, but never
+    closer than ``min_spacing`` px per view step: on 7x7 grids the floor binds (1/6 px by
+    ``step`` alone), on 5x5 and 3x3 it does not; ``min_spacing=0`` is ``step`` alone."""
+    from lfstream.codec import _kernels
+
+    seen = []
+    real = _kernels.sweep_cost
+
+    def spy(images, offsets, shifts, cost):
+        seen.append(np.asarray(shifts, np.float64))
+        return real(images, offsets, shifts, cost)
+
+    monkeypatch.setattr(_kernels, "sweep_cost", spy)
+    lf = fronto_parallel_plane(views, (48, 64), 0.6, seed=2).lf[0]
+    opts = H.HintOptions(max_disparity=2.0)  # no range pass: the one sweep is the working one
+    H.estimate_hint_map(lf, opts)
+    work = opts.work_scale
+    reach = views // 2
+    (shifts,) = seen
+    np.testing.assert_allclose(np.diff(shifts) * work, spacing, rtol=1e-5)  # shifts are per working px
+    seen.clear()
+    H.estimate_hint_map(lf, H.HintOptions(max_disparity=2.0, min_spacing=0.0))
+    np.testing.assert_allclose(np.diff(seen[0]) * work, opts.step * work / reach, rtol=1e-5)
 
 
 def test_version_1_payloads_still_decode():
