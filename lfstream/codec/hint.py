@@ -101,8 +101,9 @@ class HintOptions:
         min_spacing: the candidates' spacing is at least this many pixels of the full view
             per view step (0: ``step`` alone). On a 7x7 grid ``step`` alone spaces them 1/6
             px apart; a quarter pixel (a third fewer candidates) measured, at q50, one frame,
-            two Zen 5 cores: encode 8-9 % faster on the real 7x7 captures, decoded MPSNR
-            within 0.02 dB of the finer sweep on them (synthetic clip +0.04 dB), MSSIM within
+            two Zen 5 cores: the encode 0.93 / 0.91 / 0.98 the time (synthetic clip,
+            lytro_bikes, lytro_translucent; bench/ab.py), decoded MPSNR within 0.02 dB of the
+            finer sweep on the real captures (synthetic clip +0.04 dB), MSSIM within
             0.0001, and on the ground truth of 14 synthetic 7x7x375x540 scenes MSEx100
             28.63 -> 28.19, BadPix(0.07) 0.406 -> 0.356. It does not bind on 5x5 or 3x3 grids
             (1/4 and 1/2 px already), where wider spacing lost: seahorse (5x5) -0.09 dB at
