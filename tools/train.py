@@ -2,16 +2,21 @@
 
 Stages, as in the seed: ``jpeg_hance`` (MSE on JPEG crops), ``depth_net`` (unsupervised
 loss, JPEG-Hance frozen in front of it), ``refnet`` (SaS focal-stack labels). ``all`` runs
-the three in order (Depth-Net uses the JPEG-Hance just trained). The fast presets of
-JPEG-Hance and Depth-Net train on the real samples instead (``../shared/data``): JPEG-Hance
-fast in two phases, MSE on crops of every view, then the light field the decoder warps from
-the restored centre view (:func:`hance_lf_loss`; ``--objective image`` stops after the
-first, ``--init shipped|FILE`` runs only the second from those weights), Depth-Net fast as
-the hint refiner (:func:`refiner_batch_loss`).
+the three in order (Depth-Net uses the JPEG-Hance just trained). JPEG-Hance (both presets)
+and Depth-Net fast train on the real samples instead (``../shared/data``): JPEG-Hance in
+two phases, MSE on crops of every view, then the light field the decoder warps from the
+restored centre view (:func:`hance_lf_loss`; ``--objective image`` stops after the first,
+``--init shipped|FILE`` runs only the second from those weights), Depth-Net fast as the
+hint refiner (:func:`refiner_batch_loss`).
 
     python tools/train.py all --preset fast --device cuda --out runs/fast --ship
     python tools/train.py depth_net --steps 4000 --resume --out runs/fast
     python tools/train.py jpeg_hance --init shipped --out runs/lf --ship
+    # JPEG-Hance paper as shipped (47 min on the 2-core CPU; --steps sets both phases' steps,
+    # so the phases run apart here: 3,000 and 800)
+    python tools/train.py jpeg_hance --preset paper --objective image --steps 3000 --out runs/paper
+    python tools/train.py jpeg_hance --preset paper --init runs/paper/jpeg_hance-paper.pt --steps 800 \
+        --out runs/paper-lf --ship
 
 Every run is seeded; checkpoints (model, optimiser, step) are written every
 ``--checkpoint-every`` steps to ``OUT/NAME-PRESET.ckpt`` and ``--resume`` continues from
@@ -690,16 +695,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--checkpoint-every", type=int, default=250)
     p.add_argument("--time-limit", type=float, default=0.0, help="seconds per model; stop early and ship")
     p.add_argument("--objective", choices=["image", "lf"], default="lf",
-                   help="JPEG-Hance fast: 'lf' (default) adds the decoded-LF fine-tuning phase after the "
+                   help="JPEG-Hance: 'lf' (default) adds the decoded-LF fine-tuning phase after the "
                         "image phase; 'image' stops after the image phase")
     p.add_argument("--init", metavar="shipped|FILE",
                    help="start from these weights (a checkpoint this tool wrote, or the shipped ones); "
-                        "JPEG-Hance fast then runs only the phase --objective names")
+                        "JPEG-Hance then runs only the phase --objective names")
     p.add_argument("--ship", action="store_true", help="write the final weights into lfstream/weights/")
     args = p.parse_args(argv)
     names = list(MODEL_NAMES) if args.model == "all" else [args.model]
     if args.init and (names != ["jpeg_hance"] or not spec("jpeg_hance", args.preset).config.after_deblock):
-        p.error("--init: only jpeg_hance --preset fast (trained on real views) starts from given weights")
+        p.error("--init: only jpeg_hance (trained on real views) starts from given weights")
     try:
         return _train_all(args, names)
     except LFStreamError as exc:  # a bad --init file, missing samples: one line, not a traceback

@@ -9,7 +9,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from lfstream.cli._common import coding_layers, emit, float_in, int_in, parse_float_list
-from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
+from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
 from lfstream.stream.config import BATCH_RANGE, FOCUS_MODES, QUEUE_RANGE, REFOCUS_MODES, SAVE_KINDS, StreamConfig
 
 
@@ -29,6 +29,8 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1, help="frames per network batch in the decoder")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto")
+    p.add_argument("--networks", choices=NETWORK_PRESETS, default="fast",
+                   help="the decoder's networks' shipped weights: fast, or paper (JPEG-Hance at the seed's size)")
     cam = p.add_argument_group("camera (optional: each focal plane then records its refocus distance)")
     cam.add_argument("--focal-length", type=float_in(1e-3, 1e6), metavar="MM", help="main-lens focal length")
     cam.add_argument("--f-number", type=float_in(0.1, 1000), help="main-lens f-number")
@@ -97,7 +99,7 @@ def pipeline_config(args: argparse.Namespace, **extra) -> StreamConfig:
     """The :class:`StreamConfig` the flags describe (``extra``: fields only ``stream`` sets)."""
     cfg = StreamConfig(camera=camera_from_args(args), refocus=args.refocus, alphas=args.alphas, device=args.device,
                        batch=args.batch, depth=args.depth,
-                       hance=args.hance,
+                       hance=args.hance, networks=args.networks,
                        save=tuple(s for s in args.save.split(",") if s), skip_static=not args.no_skip_static,
                        skip_planes=args.skip_planes, mssim_every=args.mssim_every, queue_size=args.queue_size, **extra)
     cfg.validate()

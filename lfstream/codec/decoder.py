@@ -33,22 +33,29 @@ from lfstream.errors import BitstreamError, LFFileError, LFValueError
 from lfstream.lightfield import check_first_frame, frames_in_range
 
 DEPTH_MODES = ("auto", "hint", "flat", "net")
+#: The networks' presets a decoder can load (:mod:`lfstream.models.registry`, named here so that
+#: the command line checks them without importing torch): ``fast`` (every network ships it)
+#: and ``paper`` (the seed's sizes; JPEG-Hance ships it, Depth-Net does not).
+NETWORK_PRESETS = ("fast", "paper")
 HANCE_MODES = ("auto", "on", "off")
 # "auto" runs JPEG-Hance only up to this JPEG quality per preset, where it was measured to
-# beat what it replaces. paper: +0.52 dB at q70, -1.35 at q90 (bench/networks.py, seahorse
-# and HCI dino/cotton). fast (trained on real views after the post-filter, then fine-tuned on
-# the decoded LF; judged on scenes it was not trained on: seahorse, cotton, lytro_translucent):
-# over the post-filter on their centre views +0.07..+0.90 dB at q10..q60 (SSIM +0.0002..+0.0021),
-# +0.05..+0.50 at q70, -0.84..+0.34 at q90; on the decoded LF at q30/50/70 seahorse
-# +0.17/-0.07/-0.21 dB, cotton and lytro_translucent +0.04..+0.32 (bench/networks.py, 2026-11-24).
-HANCE_MAX_QUALITY = {"fast": 60, "paper": 70}
+# beat what it replaces. Both presets are trained on real views after the post-filter, then
+# fine-tuned on the decoded LF, and judged on scenes they were not trained on (seahorse,
+# cotton, lytro_translucent; bench/networks.py). fast: over the post-filter on their centre
+# views +0.07..+0.90 dB at q10..q60 (SSIM +0.0002..+0.0021), +0.05..+0.50 at q70, -0.84..+0.34
+# at q90; on the decoded LF at q30/50/70 seahorse +0.17/-0.07/-0.21 dB, cotton and
+# lytro_translucent +0.04..+0.32 (2026-11-24). paper (2026-11-27): centre views +0.19..+1.65
+# dB at q10..q60, -0.00..+0.70 at q70, -1.39..+0.17 at q90; the decoded LF at q30/50/70
+# seahorse +0.53/+0.30/-0.04 dB, cotton +0.68/+0.65/+0.60, lytro_translucent +0.32/+0.22/+0.10.
+HANCE_MAX_QUALITY = {"fast": 60, "paper": 60}
 #: Presets "auto" runs on a CUDA device only: on the 2-core CPU the fast network costs
 #: 84-107 ms a 375 x 540 view on the Zen 3 machine (two threads; 90 ms in its manifest entry),
 #: about twice the rest of a 7x7 decode (~45 ms); on the Zen 5 one 27-35 ms (its activations
-#: in place, the view in row strips), still about twice the rest of the decode (~15 ms);
+#: in place, the view in row strips), still about twice the rest of the decode (~15 ms), and
+#: the paper one 0.6 s;
 #: ``hance="on"`` runs it anywhere, and "auto" too on a stream with the encoder's strength maps
 #: (:data:`lfstream.codec.hance.HANCE_MAP_PRESET`), whose encoder measured where it helps.
-HANCE_AUTO_GPU_ONLY = ("fast",)
+HANCE_AUTO_GPU_ONLY = ("fast", "paper")
 #: Frames per network batch the decoder accepts.
 BATCH_RANGE = (1, 256)
 #: Residual bits per coded pixel from which the warp leaves the residual's decode a core
@@ -94,7 +101,7 @@ class Decoder:
             ``Encoder(hance_map=True)``), ``"on"`` or ``"off"``.
         device: where the networks run (``"cpu"`` or ``"cuda"``); on a CUDA device a batch's
             frames are also warped there together (:attr:`warps_on_device`).
-        preset: network preset whose shipped weights are used.
+        preset: network preset whose shipped weights are used (:data:`NETWORK_PRESETS`).
         deblock: the post-filter of JPEG centre views (:func:`lfstream.codec.jpeg.post_filter_jpeg`:
             strength from each JPEG's own quantisation table, the filter the encoder named
             in it) where JPEG-Hance does not run (a network gets the filter it was trained
@@ -115,6 +122,8 @@ class Decoder:
             raise LFValueError(f"depth: one of {', '.join(DEPTH_MODES)}, got {self.depth!r}")
         if self.hance not in HANCE_MODES:
             raise LFValueError(f"hance: one of {', '.join(HANCE_MODES)}, got {self.hance!r}")
+        if self.preset not in NETWORK_PRESETS:
+            raise LFValueError(f"preset: one of {', '.join(NETWORK_PRESETS)}, got {self.preset!r}")
         from lfstream.models.device import check_device
 
         self.device = check_device(self.device)
@@ -457,10 +466,10 @@ def _to_host(tensor) -> np.ndarray:
 def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
                 max_frames: int | None = None, hance: str = "auto", device: str = "cpu",
                 batch: int = 1, deblock: bool = True, out: np.ndarray | None = None,
-                first_frame: int = 0) -> Iterator[DecodedFrame]:
+                first_frame: int = 0, preset: str = "fast") -> Iterator[DecodedFrame]:
     """Decodes a stream frame by frame (networks batched over ``batch`` frames); every
     complete frame before a damaged packet is yielded, then :class:`BitstreamError` names
-    the damaged frame. ``deblock``: :attr:`Decoder.deblock`. ``out``: a ``(T, U, V, H, W,
+    the damaged frame. ``deblock``, ``preset``: :class:`Decoder`'s. ``out``: a ``(T, U, V, H, W,
     3)`` uint8 array the ``k``-th frame decoded (``k < T``) goes into
     (:meth:`Decoder.decode_batch`); later frames get arrays of their own.
 
@@ -474,7 +483,8 @@ def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits 
         raise LFValueError(f"batch: an integer in {lo}..{hi}, got {batch!r}")
     check_first_frame(first_frame)
     header = read_header(fh, limits)
-    dec = Decoder(header, depth=depth, occlusion=occlusion, hance=hance, device=device, deblock=deblock)
+    dec = Decoder(header, depth=depth, occlusion=occlusion, hance=hance, device=device, deblock=deblock,
+                  preset=preset)
     pending: list[Packet] = []
 
     done = 0  # frames decoded: the index into ``out`` of the next
@@ -517,8 +527,9 @@ def stack_frames(frames: list[np.ndarray]) -> np.ndarray:
 
 def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
            hance: str = "auto", device: str = "cpu", deblock: bool = True, first_frame: int = 0,
-           max_frames: int | None = None) -> np.ndarray:
-    """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8 (``deblock``: :attr:`Decoder.deblock`);
+           max_frames: int | None = None, preset: str = "fast") -> np.ndarray:
+    """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8 (``deblock``: :attr:`Decoder.deblock`;
+    ``preset``: the networks' weights, :attr:`Decoder.preset`);
     ``first_frame``, ``max_frames``: a range of the stream's frames (:func:`iter_decode`:
     the same bytes as those frames of a whole decode).
 
@@ -546,7 +557,7 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
     frames: list[np.ndarray] = []
     try:
         for f in iter_decode(buf, depth, occlusion, limits, hance=hance, device=device, deblock=deblock, out=out,
-                             first_frame=first_frame, max_frames=max_frames):
+                             first_frame=first_frame, max_frames=max_frames, preset=preset):
             frames.append(f.lf)
     except BitstreamError as exc:
         exc.partial = frames_array(frames, out) if frames else None  # type: ignore[attr-defined]
@@ -590,9 +601,10 @@ def frames_array(frames: list[np.ndarray], out: np.ndarray | None) -> np.ndarray
 
 
 def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | None = None,
-                hance: str = "auto", device: str = "cpu", first_frame: int = 0) -> tuple[np.ndarray, float]:
-    """Decodes an ``.lfs`` file (from frame ``first_frame``, :func:`iter_decode`); returns
-    ``(lf, fps)``."""
+                hance: str = "auto", device: str = "cpu", first_frame: int = 0,
+                preset: str = "fast") -> tuple[np.ndarray, float]:
+    """Decodes an ``.lfs`` file (from frame ``first_frame``, :func:`iter_decode`; ``preset``:
+    the networks' weights, :attr:`Decoder.preset`); returns ``(lf, fps)``."""
     path = Path(path)
     check_first_frame(first_frame)
     with _errors_naming(path), open(path, "rb") as fh:
@@ -601,7 +613,7 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
         out = video_array(header, frames_in_range(count, first_frame, max_frames, path) if count else 0)
         fh.seek(0)
         frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device,
-                                            out=out, first_frame=first_frame)]
+                                            out=out, first_frame=first_frame, preset=preset)]
     if not frames:
         raise BitstreamError(f"{path}: stream holds no frames")
     return frames_array(frames, out), header.fps
@@ -657,6 +669,6 @@ def _errors_naming(path: str | os.PathLike) -> Iterator[None]:
         raise BitstreamError(f"{path}: {exc}") from exc
 
 
-__all__ = ["DEPTH_MODES", "HANCE_MODES", "HANCE_MAX_QUALITY", "BATCH_RANGE", "BESIDE_MIN_BITS", "Decoder",
+__all__ = ["DEPTH_MODES", "NETWORK_PRESETS", "HANCE_MODES", "HANCE_MAX_QUALITY", "BATCH_RANGE", "BESIDE_MIN_BITS", "Decoder",
            "DecodedFrame", "decode", "iter_decode", "decode_file", "lfs_frames", "stack_frames", "video_array",
            "frames_array", "VIDEO_ARRAY_MEMORY_SHARE"]

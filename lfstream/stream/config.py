@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
+from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
 from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS, Encoder
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.residual import RESIDUAL_MODES
@@ -66,6 +66,8 @@ class StreamConfig:
     hance_map: bool = False
     depth: str = "auto"
     hance: str = "auto"
+    # the decoder's networks' shipped weights (Decoder.preset: fast, or JPEG-Hance paper)
+    networks: str = "fast"
     refocus: str = "auto"
     # "auto": planes fitted to the scene's disparity; "seed": the seed's sixteen alphas
     alphas: tuple[float, ...] | str = "auto"
@@ -126,6 +128,7 @@ class StreamConfig:
                 check_alpha(a)
         check_choice("depth", self.depth, DEPTH_MODES)
         check_choice("hance", self.hance, HANCE_MODES)
+        check_choice("networks", self.networks, NETWORK_PRESETS)
         check_choice("refocus", self.refocus, REFOCUS_MODES)
         check_choice("transport", self.transport, TRANSPORTS)
         bad = [s for s in self.save if s not in SAVE_KINDS]

@@ -245,8 +245,8 @@ class Pipeline:
             if refocuser is not None else None,
             focal_planes=refocuser.planes() if refocuser is not None else [],
             plane_updates=refocuser.updates if refocuser is not None else [],
-            hance={"mode": cfg.hance, "ran": bool(decoder is not None and decoder.decoder is not None
-                                                  and decoder.decoder.uses_hance)},
+            hance={"mode": cfg.hance, "networks": cfg.networks,
+                   "ran": bool(decoder is not None and decoder.decoder is not None and decoder.decoder.uses_hance)},
             interrupted=self.interrupted,
             outputs=sink.sink.files if sink is not None and sink.sink is not None else [],
         )

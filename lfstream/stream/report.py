@@ -136,8 +136,8 @@ def stopped_summary(transport: str) -> dict:
     summary, nothing done, ``interrupted`` true."""
     return build_summary(wall_s=0.0, frames=0, stages={}, rate=RateStats(), quality=QualityStats(),
                          static=StaticSkipStats(enabled=False), planes=PlaneSkipStats(enabled=False), receive=None,
-                         transport=transport, refocus=None, hance={"mode": None, "ran": False}, interrupted=True,
-                         outputs=[])
+                         transport=transport, refocus=None, hance={"mode": None, "networks": None, "ran": False},
+                         interrupted=True, outputs=[])
 
 
 def write_summary(out: Path, summary: dict) -> None:

@@ -294,7 +294,8 @@ class DecoderStage(Stage):
         cfg, seq = self.config, None
         try:
             header = self.channel.header(self.control.stop_event)
-            dec = self.decoder = Decoder(header, depth=cfg.depth, hance=cfg.hance, device=cfg.device)
+            dec = self.decoder = Decoder(header, depth=cfg.depth, hance=cfg.hance, device=cfg.device,
+                                         preset=cfg.networks)
             prev: DecodedFrame | None = None
             pending: list[Packet] = []
             packets = self.channel.packets(self.control.stop_event)

@@ -653,6 +653,31 @@ def test_encode_hance_map_sends_strength_maps_and_refuses_rate_control(capsys, t
     assert not (tmp_path / "b.lfs").exists()
 
 
+def test_decode_networks_picks_the_shipped_weights(capsys, tmp_path):
+    """``decode --networks paper`` runs JPEG-Hance paper (what ``lfstream.decode(...,
+    preset="paper")`` gives, not the fast network's views); a preset without the network
+    asked for (Depth-Net paper ships no weights) is one line and exit status 2, nothing
+    written; an unknown preset is refused by the library too."""
+    import lfstream
+    from lfstream.errors import LFValueError
+
+    lf = synth_clip(1, 3, (40, 56), seed=3).lf[0]
+    data = lfstream.encode(lf, preset="fast")
+    (tmp_path / "a.lfs").write_bytes(data)
+    code, _, _ = run(capsys, "decode", tmp_path / "a.lfs", "-o", tmp_path / "paper.npy", "--hance", "on",
+                     "--networks", "paper")
+    assert code == 0
+    paper = np.load(tmp_path / "paper.npy")
+    assert np.array_equal(paper, lfstream.decode(data, hance="on", preset="paper"))
+    assert not np.array_equal(paper, lfstream.decode(data, hance="on"))  # the fast network's
+    code, _, err = run(capsys, "decode", tmp_path / "a.lfs", "-o", tmp_path / "net.npy", "--depth", "net",
+                       "--networks", "paper")
+    assert code == 2 and "depth_net/paper" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "net.npy").exists()
+    with pytest.raises(LFValueError, match="preset"):
+        lfstream.decode(data, preset="best")
+
+
 @pytest.mark.parametrize("name", ["clip.avi", "clip.npy", "clip.npz", "clipdir", "clip.mkv"])
 def test_convert_writes_the_same_frames_in_another_format(capsys, tmp_path, name):
     """``convert`` of a lossless .mp4 mosaic video (read frame by frame) to each format:

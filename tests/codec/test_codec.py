@@ -260,8 +260,8 @@ def test_encode_star_light_field_with_missing_views():
 
 
 def test_hance_auto_on_cpu_leaves_the_fast_network_off_and_on_filters_first(monkeypatch):
-    """``hance="auto"`` runs JPEG-Hance fast only on a GPU (on CPU it costs more than the
-    rest of the decode); ``"on"`` feeds it the centre view post-filtered as it was trained,
+    """``hance="auto"`` runs JPEG-Hance (fast or paper) only on a GPU (on CPU it costs more
+    than the rest of the decode); ``"on"`` feeds it the centre view post-filtered as it was trained,
     with the filter the stream names (here the wider one, not the default)."""
     from dataclasses import replace
 
@@ -273,6 +273,8 @@ def test_hance_auto_on_cpu_leaves_the_fast_network_off_and_on_filters_first(monk
     data = lfstream.encode(clip.lf, depth_hint=False)
     header = read_header(io.BytesIO(data))
     assert header.quality <= 60 and not Decoder(header, hance="auto").uses_hance
+    assert not Decoder(header, hance="auto", preset="paper").uses_hance  # 0.6 s a view on the CPU
+    assert Decoder(header, hance="on", preset="paper").uses_hance
     fh = io.BytesIO(data)
     read_header(fh)
     packet = next(iter_packets(fh, header))

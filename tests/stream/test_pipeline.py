@@ -550,6 +550,24 @@ def test_a_stream_with_strength_maps_sends_them_and_its_decoder_runs_the_network
             StreamConfig(hance_map=True, **bad).validate()
 
 
+def test_the_streams_decoder_runs_the_networks_preset_named(tmp_path):
+    """``networks="paper"``: the stream's decoder runs JPEG-Hance paper (its MPSNR that of
+    ``lfstream.decode(..., preset="paper")`` of the stream it wrote), and the summary names
+    the preset; an unknown preset is refused before anything runs."""
+    import lfstream
+    from lfstream.metrics import mpsnr
+
+    frames = list(synthetic_source(frames=1, views=3, size=(40, 56), seed=2, cache=False))
+    config = StreamConfig(refocus="sas", save=(), hance="on", networks="paper", mssim_every=0, transport="file")
+    summary = Pipeline(iter(frames), config, None, stream_file=tmp_path / "stream.lfs").run()
+    assert summary["skips"]["jpeg_hance"] == {"mode": "on", "networks": "paper", "ran": True}
+    data = (tmp_path / "stream.lfs").read_bytes()
+    assert summary["mpsnr"] == pytest.approx(mpsnr(frames[0], lfstream.decode(data, hance="on", preset="paper")[0]),
+                                             abs=1e-6)
+    with pytest.raises(LFStreamError, match="networks"):
+        StreamConfig(networks="best").validate()
+
+
 def test_the_warm_up_runs_the_networks_the_streams_decoder_runs(monkeypatch):
     """With ``--hance on`` and ``--depth net`` the warm-up imports torch and runs both
     networks once on its tiny frame (the first timed frame paid 0.8 s of torch's import
