@@ -9,7 +9,7 @@ import pytest
 
 import lfstream
 from lfstream.cli import main
-from lfstream.cluster import EncodeOptions, batch
+from lfstream.cluster import DecodeOptions, EncodeOptions, batch
 from lfstream.errors import LFValueError
 from lfstream.synth import synth_clip
 
@@ -70,6 +70,18 @@ def test_decode_mode_reassembles_frames_in_order(videos, tmp_path):
     dec = batch([lfs], tmp_path / "dec", mode="decode", group_frames=2)
     assert dec.ok and dec.files[0].frames == 7
     assert np.array_equal(np.load(dec.files[0].output), lfstream.decode(open(lfs, "rb").read()))
+
+
+def test_decode_mode_runs_the_networks_named(videos, tmp_path):
+    """``DecodeOptions(networks="paper")`` with JPEG-Hance on: the frames of
+    ``lfstream.decode(..., hance="on", preset="paper")``."""
+    paths, _ = videos
+    lfs = batch([paths[0]], tmp_path / "lfs", group_frames=4, encode=EncodeOptions(quality=60)).files[0].output
+    dec = batch([lfs], tmp_path / "dec", mode="decode", group_frames=4,
+                decode=DecodeOptions(hance="on", networks="paper"))
+    assert dec.ok
+    assert np.array_equal(np.load(dec.files[0].output),
+                          lfstream.decode(open(lfs, "rb").read(), hance="on", preset="paper"))
 
 
 def test_decode_mode_takes_a_frame_range(videos, tmp_path):

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from lfstream.cli._common import add_read_options, emit, int_in, read_options
-from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES
+from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
 from lfstream.codec.encoder import PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
 
@@ -38,6 +38,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "--hance-map; measured on each group's first frame)")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto", help="decode: disparity source")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto", help="decode: JPEG-Hance")
+    p.add_argument("--networks", choices=NETWORK_PRESETS, default="fast",
+                   help="decode: the networks' shipped weights (fast, or JPEG-Hance paper)")
     p.add_argument("--device", default="cpu", help="decode: where the networks run")
     p.add_argument("--format", default=".npy", help="decode: output extension (.npy, .npz, .avi, .mp4, .mkv or '' / folder "
                    "for folders of views)")
@@ -61,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
                    workers=args.workers, group_frames=args.group,
                    encode=EncodeOptions(quality=args.quality, depth_hint=not args.no_depth_hint, preset=args.preset,
                                         hance_map=args.hance_map),
-                   decode=DecodeOptions(depth=args.depth, hance=args.hance, device=args.device),
+                   decode=DecodeOptions(depth=args.depth, hance=args.hance, device=args.device, networks=args.networks),
                    read=read_options(args), output_format=args.format, overwrite=args.overwrite)
     emit(args, report.as_dict(), _text)
     if not report.ok:

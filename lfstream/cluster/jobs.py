@@ -93,6 +93,7 @@ class DecodeOptions:
     depth: str = "auto"
     hance: str = "auto"
     device: str = "cpu"
+    networks: str = "fast"  # the networks' shipped weights (Decoder.preset)
 
 
 @dataclass
@@ -127,7 +128,7 @@ def decode_group(header_bytes: bytes, packets: list[bytes], start: int, options:
 
     t0 = time.perf_counter()
     header = read_header(io.BytesIO(header_bytes))
-    dec = Decoder(header, depth=options.depth, hance=options.hance, device=options.device)
+    dec = Decoder(header, depth=options.depth, hance=options.hance, device=options.device, preset=options.networks)
     parsed = [read_packet(io.BytesIO(p), header) for p in packets]
     frames = np.stack([f.lf for f in dec.decode_batch(parsed)])
     return GroupResult(start, frames=frames, seconds=time.perf_counter() - t0)
