@@ -101,17 +101,7 @@ def decoded_quality(data: bytes, ref: np.ndarray, mask: np.ndarray | None, prese
     """MPSNR (capped) and MSSIM of the first frame of ``data`` decoded with
     ``decode_options`` and the networks of ``preset``, over the views ``mask`` marks present
     (``ref``: those views)."""
-    import io
-
-    from lfstream.codec.bitstream import iter_packets, read_header
-    from lfstream.codec.decoder import Decoder
-
-    if preset == "fast":
-        rec = decode(data, **decode_options)[0]
-    else:  # the decoder's preset is not among decode()'s options: its class, first packet
-        fh = io.BytesIO(data)
-        header = read_header(fh)
-        rec = Decoder(header, preset=preset, **decode_options).decode_packet(next(iter_packets(fh, header))).lf
+    rec = decode(data, preset=preset, **decode_options)[0]
     rec = rec if mask is None else rec[mask][:, None]
     return capped(mpsnr(ref, rec)), float(mssim(ref, rec))
 
