@@ -33,9 +33,10 @@ from lfstream.errors import BitstreamError, LFFileError, LFValueError
 from lfstream.lightfield import check_first_frame, frames_in_range
 
 DEPTH_MODES = ("auto", "hint", "flat", "net")
-#: The networks' presets a decoder can load (:mod:`lfstream.models.registry`, named here so that
-#: the command line checks them without importing torch): ``fast`` (every network ships it)
-#: and ``paper`` (the seed's sizes; JPEG-Hance ships it, Depth-Net does not).
+#: The networks' presets a decoder can load (:data:`lfstream.models.registry.PRESETS`, named
+#: again here because codec sits below models and the command line checks them without
+#: importing torch; a test holds the two equal): ``fast`` (every network ships it) and
+#: ``paper`` (the seed's sizes; JPEG-Hance ships it, Depth-Net does not).
 NETWORK_PRESETS = ("fast", "paper")
 HANCE_MODES = ("auto", "on", "off")
 # "auto" runs JPEG-Hance only up to this JPEG quality per preset, where it was measured to

@@ -37,6 +37,15 @@ from tests.conftest import shared
 SEED_PARAMS = {"jpeg_hance": 202_435, "depth_net": 38_200_000, "refnet": 12_500_000}
 
 
+def test_the_decoders_network_presets_are_the_registrys():
+    """codec.decoder names the presets again (below models, and torch-free for the command
+    line): the same set as the registry builds."""
+    from lfstream.codec.decoder import NETWORK_PRESETS
+    from lfstream.models.registry import PRESETS
+
+    assert sorted(NETWORK_PRESETS) == sorted(PRESETS)
+
+
 @pytest.mark.parametrize("name", sorted(SEED_PARAMS))
 def test_paper_preset_parameter_counts(name):
     n = count_params(spec(name, "paper").build())
