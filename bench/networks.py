@@ -27,6 +27,7 @@ from lfstream.codec.jpeg import deblock_jpeg, decode_jpeg, encode_jpeg, jpeg_qua
 from lfstream.lightfield import to_network_input
 from lfstream.metrics import capped, mpsnr, mssim, psnr, ssim
 from lfstream.models.depth_net import predict_view_disparities
+from lfstream.models.device import native_bfloat16
 from lfstream.models.jpeg_hance import restore_images
 from lfstream.models.registry import load_model, manifest_entry
 from lfstream.refocus import focal_stack
@@ -47,6 +48,12 @@ def trained_on(name: str, preset: str) -> tuple[str, ...]:
     only on the others."""
     entry = manifest_entry(name, preset) or {}
     return tuple(entry.get("recipe", {}).get("scenes", ()))
+
+
+def timed_precisions(device: str) -> tuple[str, ...]:
+    """The inference precisions the timings cover: float32, and bfloat16 where ``device`` has
+    it natively (what the decoder's ``"auto"`` then runs; lfstream.models.device)."""
+    return ("float32", "bfloat16") if native_bfloat16(device) else ("float32",)
 
 
 def synthetic_lfs(count: int, size: tuple[int, int], seed: int = 5000) -> list[tuple[str, np.ndarray, np.ndarray]]:
@@ -82,8 +89,10 @@ def bench_hance(device: str, runs: int, quick: bool) -> list[dict]:
                              "deblock_ssim": float(ssim(view, filt))})
         img = np.ascontiguousarray(np.broadcast_to(views[-1][1][:1, :1], (375, 540, 3)))
         img = (np.random.default_rng(0).random((375, 540, 3)) * 255).astype(np.uint8) if img.std() == 0 else img
-        t = timeit(lambda: restore_images(img[None], model, device), runs=runs)
-        rows.append({"model": "jpeg_hance", "preset": preset, "timing": "375x540", "device": device, **t})
+        for precision in timed_precisions(device):
+            t = timeit(lambda: restore_images(img[None], model, device, precision), runs=runs)
+            rows.append({"model": "jpeg_hance", "preset": preset, "timing": "375x540", "device": device,
+                         "precision": precision, **t})
     rows += hance_lf_rows(device, quick)
     for r in rows:
         if "quality" in r and r["quality"] == 50:
@@ -92,7 +101,7 @@ def bench_hance(device: str, runs: int, quick: bool) -> list[dict]:
                   f"(post-filter {r['deblock_psnr']:6.2f}), SSIM {r['jpeg_ssim']:.4f} -> {r['hance_ssim']:.4f} "
                   f"(post-filter {r['deblock_ssim']:.4f})")
         elif "timing" in r:
-            print(f"JPEG-Hance {r['preset']:5s} 375x540 on {device}: {r['median_s'] * 1e3:.1f} ms")
+            print(f"JPEG-Hance {r['preset']:5s} 375x540 on {device} ({r['precision']}): {r['median_s'] * 1e3:.1f} ms")
     return rows
 
 
@@ -180,9 +189,11 @@ def bench_depth(device: str, runs: int, quick: bool) -> list[dict]:
     net = load_model("depth_net", "fast", device)
     c = (np.random.default_rng(0).random((1, 375, 540, 3)) * 255).astype(np.uint8)
     h = np.zeros((1, 375, 540), np.float32)
-    t = timeit(lambda: predict_view_disparities(c, net, (7, 7), h, device), runs=runs)
-    rows.append({"model": "depth_net", "preset": "fast", "timing": "7x7x375x540", "device": device, **t})
-    print(f"Depth-Net fast 375x540 -> 49 maps on {device}: {t['median_s'] * 1e3:.1f} ms")
+    for precision in timed_precisions(device):
+        t = timeit(lambda: predict_view_disparities(c, net, (7, 7), h, device, precision=precision), runs=runs)
+        rows.append({"model": "depth_net", "preset": "fast", "timing": "7x7x375x540", "device": device,
+                     "precision": precision, **t})
+        print(f"Depth-Net fast 375x540 -> 49 maps on {device} ({precision}): {t['median_s'] * 1e3:.1f} ms")
     return rows
 
 

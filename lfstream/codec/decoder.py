@@ -53,7 +53,8 @@ HANCE_MAX_QUALITY = {"fast": 60, "paper": 60}
 #: 84-107 ms a 375 x 540 view on the Zen 3 machine (two threads; 90 ms in its manifest entry),
 #: about twice the rest of a 7x7 decode (~45 ms); on the Zen 5 one 27-35 ms (its activations
 #: in place, the view in row strips), still about twice the rest of the decode (~15 ms), and
-#: the paper one 0.6 s;
+#: the paper one 0.6 s; in bfloat16 (lfstream.models.device, where the CPU has it) 24-32 ms
+#: and 0.39 s, still more than the rest of the decode;
 #: ``hance="on"`` runs it anywhere, and "auto" too on a stream with the encoder's strength maps
 #: (:data:`lfstream.codec.hance.HANCE_MAP_PRESET`), whose encoder measured where it helps.
 HANCE_AUTO_GPU_ONLY = ("fast", "paper")

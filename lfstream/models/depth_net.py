@@ -35,6 +35,7 @@ from torch import nn
 
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import to_network_input
+from lfstream.models.device import inference_precision
 from lfstream.models.layers import ELU, Bottleneck, count_params
 
 
@@ -272,13 +273,17 @@ def grid_disparities(maps: torch.Tensor | np.ndarray, views: tuple[int, int]):
 def predict_view_disparities(centres: np.ndarray, model: nn.Module, views: tuple[int, int],
                              hints: np.ndarray | None = None, device: str | torch.device = "cpu",
                              axes: list[np.ndarray | None] | None = None,
-                             out: np.ndarray | None = None) -> np.ndarray:
+                             out: np.ndarray | None = None, precision: str = "auto") -> np.ndarray:
     """Per-view disparities of a batch of decoded centre views, on the stream's view grid.
 
     A :class:`DepthRefiner` corrects the per-view maps the decoder's warp derives from each
     hint (with that frame's view ``axes``), into ``out`` where given (a C-contiguous float32
     array of at least ``B`` frames: the first ``B`` are returned); a :class:`DepthNet`
-    predicts them on its own grid (:func:`grid_disparities`).
+    predicts them on its own grid (:func:`grid_disparities`). The network runs in bfloat16
+    where the CPU has it natively (``precision``:
+    :func:`lfstream.models.device.inference_precision`; corrections within about 1e-3 px of
+    float32's; a zero correction stays exactly zero, so an untrained refiner still
+    reproduces the hint).
 
     Shape:
         - centres: ``(B, H, W, 3)`` uint8; hints: ``(B, H, W)`` float32 (when the model takes one)
@@ -297,7 +302,9 @@ def predict_view_disparities(centres: np.ndarray, model: nn.Module, views: tuple
         from lfstream.codec.warp import view_disparities
 
         axes = list(axes) if axes is not None else [None] * len(centres)
-        corr = model.corrections(x, h).float().cpu().numpy()
+        with inference_precision(str(x.device), precision):
+            corr = model.corrections(x, h)
+        corr = corr.float().cpu().numpy()
         # DepthRefiner.apply in the kernel that splats the hint's maps, row by row (the same
         # values; 49 numpy sums afterwards took 12 ms at 7x7x375x540)
         if out is not None:
@@ -308,8 +315,9 @@ def predict_view_disparities(centres: np.ndarray, model: nn.Module, views: tuple
             return out[: len(corr)]
         maps = [view_disparities(hints[k], views, axes=a, corrections=c) for k, (c, a) in enumerate(zip(corr, axes))]
         return maps[0][None] if len(maps) == 1 else np.stack(maps)
-    maps = model(x, h).float().cpu().numpy()
-    return np.ascontiguousarray(grid_disparities(maps, views))
+    with inference_precision(str(x.device), precision):
+        maps = model(x, h)
+    return np.ascontiguousarray(grid_disparities(maps.float().cpu().numpy(), views))
 
 
 def build_depth_net(preset: str = "fast", views: tuple[int, int] = (7, 7), hint: bool | None = None) -> nn.Module:

@@ -121,20 +121,23 @@ def test_untrained_hance_is_identity_and_function_matches_module():
         jpeg_hance(torch.rand(4, 8, 8), model)
 
 
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
 @pytest.mark.parametrize("preset", ["fast", "paper"])
-def test_hance_in_strips_is_the_whole_forward_pass(preset, monkeypatch, rng):
+def test_hance_in_strips_is_the_whole_forward_pass(preset, precision, monkeypatch, rng):
     """restore_images on the CPU runs row strips with their receptive field's context rows:
-    the bytes of the whole image's forward pass (exact here; a level on at most 1e-4 of the
-    samples allowed for another CPU's kernels), also with strips of 8 rows, a batch, a
-    height that is not a multiple of the strip, and an image shorter than the context."""
+    the bytes of the whole image's forward pass at the same precision (exact here; a level
+    on at most 1e-4 of the samples allowed for another CPU's kernels), also with strips of 8
+    rows, a batch, a height that is not a multiple of the strip, and an image shorter than
+    the context."""
     import lfstream.models.jpeg_hance as jh
     from lfstream.lightfield import to_network_input
+    from lfstream.models.device import inference_precision
 
     model = load_model("jpeg_hance", preset, "cpu")
 
     def whole(images):
-        with torch.inference_mode():
-            y = model(to_network_input(images)).mul_(255.0).add_(0.5).clamp_(0, 255).to(torch.uint8)
+        with torch.inference_mode(), inference_precision("cpu", precision):
+            y = model(to_network_input(images)).float().mul_(255.0).add_(0.5).clamp_(0, 255).to(torch.uint8)
         return y.permute(0, 2, 3, 1).numpy()
 
     tall = rng.integers(0, 256, (2, 61, 37, 3), dtype=np.uint8)
@@ -143,7 +146,7 @@ def test_hance_in_strips_is_the_whole_forward_pass(preset, monkeypatch, rng):
     for budget in (1, 40_000, 10 << 20):  # rows 8 (the least), a few strips, the whole image
         monkeypatch.setattr(jh, "HANCE_STRIP_BYTES", budget)
         for images, want in zip((tall, short), wants):
-            diff = np.abs(restore_images(images, model).astype(np.int16) - want)
+            diff = np.abs(restore_images(images, model, precision=precision).astype(np.int16) - want)
             assert diff.max() <= 1 and (diff > 0).mean() <= 1e-4, budget
 
 
