@@ -79,6 +79,51 @@ def test_untrained_refiner_loss_is_the_hints_and_the_hint_beats_flat(sample):
     assert hint < 0.75 * flat
 
 
+def _view_mse(s: train.DepthSample, a: int, b: int, offsets: np.ndarray | None = None) -> float:
+    """MSE of view ``(a, b)`` of ``s`` predicted over the whole image as the refiner's loss
+    predicts it: the centre bilinearly sampled along the view's map times its offset, gains in."""
+    from lfstream.lightfield import to_network_input
+    from lfstream.models.warp import pixel_grid, sample_bilinear
+
+    oy, ox = (s.offsets if offsets is None else offsets)[a, b]
+    gy, gx = pixel_grid(*s.hint.shape, "cpu", torch.float64)
+    d = torch.from_numpy(np.ascontiguousarray(s.view_maps[a, b], np.float64))
+    centre = to_network_input(s.centre).double()[None]
+    warped = sample_bilinear(centre, (gy + d * float(oy))[None], (gx + d * float(ox))[None])[0]
+    gain = torch.from_numpy(np.ascontiguousarray(s.gains[a, b], np.float64)).permute(2, 0, 1)
+    return float(torch.mean((warped * gain - to_network_input(s.truth[a, b]).double()) ** 2))
+
+
+@pytest.mark.parametrize("flip_y, flip_x, transpose", [(1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 0, 1), (1, 0, 1)])
+def test_a_mirrored_sample_is_the_same_light_field(sample, flip_y, flip_x, transpose):
+    """The refiner's augmentation: every view of a mirrored or transposed sample is predicted
+    exactly as well as before (to 1e-9 relative), and only because its offsets turned with
+    it: the images mirrored under the old offsets predict the views worse."""
+    t = train.transformed_sample(sample, bool(flip_y), bool(flip_x), bool(transpose))
+    assert t.centre.shape == (sample.centre.shape[1::-1] + (3,) if transpose else sample.centre.shape)
+    for a, b in [(0, 0), (1, 3), (4, 2)]:
+        assert _view_mse(t, a, b) == pytest.approx(_view_mse(sample, a, b), rel=1e-9)
+    stale = _view_mse(t, 0, 1, offsets=sample.offsets)  # offsets (-2, -1): no transform keeps them
+    assert stale > 1.2 * _view_mse(sample, 0, 1)
+
+
+def test_refiner_log_loss_and_flips_keep_the_hint_as_the_untrained_networks_output(sample):
+    """``loss="log_mse"`` is the log of the MSE loss of the same draw; with ``flips`` the
+    untrained refiner still equals the hint on every draw (its corrections are zero)."""
+    model = spec("depth_net", "fast").build()
+    recipe = replace(RECIPE, model="depth_net", crop=48, views=3)
+    with torch.no_grad():
+        mse = float(train.refiner_batch_loss(model, sample, recipe, np.random.default_rng(5), "cpu")[0])
+        log = float(train.refiner_batch_loss(model, sample, replace(recipe, loss="log_mse"),
+                                             np.random.default_rng(5), "cpu")[0])
+        assert log == pytest.approx(np.log(mse + 1e-8), rel=1e-6)
+        for seed in range(4):
+            flipped = replace(recipe, flips="dihedral", loss="log_mse")
+            refined, hint = (float(train.refiner_batch_loss(model, sample, flipped, np.random.default_rng(seed), "cpu",
+                                                            zero=z)[0]) for z in (False, True))
+            assert np.isfinite(refined) and refined == pytest.approx(hint, rel=1e-6)
+
+
 @pytest.mark.slow
 def test_two_phase_training_records_the_image_phase_as_the_init(tmp_path):
     """``tools/train.py jpeg_hance`` (fast): the image phase, then the decoded-LF phase from
