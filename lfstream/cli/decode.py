@@ -8,6 +8,7 @@ from pathlib import Path
 
 from lfstream.cli._common import add_first_frame, emit, int_in, interrupt_after
 from lfstream.codec.decoder import BATCH_RANGE, DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
+from lfstream.models.device import PRECISIONS
 
 HELP = "decode an .lfs stream to a light field (.npy, folder or video)"
 
@@ -29,6 +30,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--networks", choices=NETWORK_PRESETS, default="fast",
                    help="the networks' shipped weights: fast, or paper (JPEG-Hance at the seed's size: better, "
                    "about 0.6 s a 375x540 view on a 2-core CPU, milliseconds on a GPU; no Depth-Net ships)")
+    p.add_argument("--precision", choices=PRECISIONS, default="auto",
+                   help="the networks' inference: auto (bfloat16 on a CPU with native bfloat16, as AVX512-BF16; "
+                   "float32 elsewhere), float32 (the bytes of a float32 machine, e.g. for regression tests "
+                   "shared across CPUs) or bfloat16")
     p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1,
                    help="frames per network batch (and per warp, on a CUDA device)")
     p.add_argument("--disparity-out", type=Path, help="folder for the centre-view disparity of each frame (PFM)")
@@ -67,7 +72,8 @@ def run(args: argparse.Namespace) -> int:
             hance = "off" if args.no_hance else args.hance
             for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
                                  device=args.device, batch=args.batch, deblock=not args.no_deblock,
-                                 first_frame=args.first_frame, max_frames=args.max_frames, preset=args.networks):
+                                 first_frame=args.first_frame, max_frames=args.max_frames, preset=args.networks,
+                                 precision=args.precision):
                 with interrupt_after():  # a frame's outputs are written whole
                     t_write = time.perf_counter()
                     if writer is None:

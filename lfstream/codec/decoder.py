@@ -109,6 +109,10 @@ class Decoder:
             in it) where JPEG-Hance does not run (a network gets the filter it was trained
             after). It is part of the prediction a residual layer corrects, so ``False``
             decodes a residual stream's prediction alone.
+        precision: the networks' inference precision, ``"auto"`` (bfloat16 on a CPU that
+            has it natively, float32 elsewhere), ``"float32"`` (the same bytes on every
+            machine whose float32 kernels agree) or ``"bfloat16"``
+            (:func:`lfstream.models.device.inference_precision`).
     """
 
     header: StreamHeader
@@ -118,8 +122,13 @@ class Decoder:
     device: str = "cpu"
     preset: str = "fast"
     deblock: bool = True
+    precision: str = "auto"
 
     def __post_init__(self) -> None:
+        from lfstream.models.device import PRECISIONS  # torch-free
+
+        if self.precision not in PRECISIONS:
+            raise LFValueError(f"precision: one of {', '.join(PRECISIONS)}, got {self.precision!r}")
         if self.depth not in DEPTH_MODES:
             raise LFValueError(f"depth: one of {', '.join(DEPTH_MODES)}, got {self.depth!r}")
         if self.hance not in HANCE_MODES:
@@ -221,7 +230,7 @@ class Decoder:
         if self._hance is not None:
             from lfstream.models.jpeg_hance import restore_images
 
-            restored = restore_images(centres, self._hance, self.device)
+            restored = restore_images(centres, self._hance, self.device, self.precision)
             if self.preset == HANCE_MAP_PRESET and self.header.codec == CODEC_JPEG:
                 # the encoder's strength map (measured for this preset's network), where the
                 # stream carries one: the correction blended in per tile (jpeg.hance_map)
@@ -437,7 +446,7 @@ class Decoder:
             # huge pages for them (bench/throughput.py's Depth-Net decode: 43-83 ms)
             self._view_maps = np.empty((len(packets), *self.header.views, h, w), np.float32)
         view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device, axes,
-                                             out=self._view_maps if refines else None)
+                                             out=self._view_maps if refines else None, precision=self.precision)
         u0, v0 = self.header.views[0] // 2, self.header.views[1] // 2
         frames = []
         for p, centre, maps, a in zip(packets, centres, view_maps, axes):
@@ -468,10 +477,10 @@ def _to_host(tensor) -> np.ndarray:
 def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
                 max_frames: int | None = None, hance: str = "auto", device: str = "cpu",
                 batch: int = 1, deblock: bool = True, out: np.ndarray | None = None,
-                first_frame: int = 0, preset: str = "fast") -> Iterator[DecodedFrame]:
+                first_frame: int = 0, preset: str = "fast", precision: str = "auto") -> Iterator[DecodedFrame]:
     """Decodes a stream frame by frame (networks batched over ``batch`` frames); every
     complete frame before a damaged packet is yielded, then :class:`BitstreamError` names
-    the damaged frame. ``deblock``, ``preset``: :class:`Decoder`'s. ``out``: a ``(T, U, V, H, W,
+    the damaged frame. ``deblock``, ``preset``, ``precision``: :class:`Decoder`'s. ``out``: a ``(T, U, V, H, W,
     3)`` uint8 array the ``k``-th frame decoded (``k < T``) goes into
     (:meth:`Decoder.decode_batch`); later frames get arrays of their own.
 
@@ -486,7 +495,7 @@ def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits 
     check_first_frame(first_frame)
     header = read_header(fh, limits)
     dec = Decoder(header, depth=depth, occlusion=occlusion, hance=hance, device=device, deblock=deblock,
-                  preset=preset)
+                  preset=preset, precision=precision)
     pending: list[Packet] = []
 
     done = 0  # frames decoded: the index into ``out`` of the next
@@ -529,9 +538,10 @@ def stack_frames(frames: list[np.ndarray]) -> np.ndarray:
 
 def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
            hance: str = "auto", device: str = "cpu", deblock: bool = True, first_frame: int = 0,
-           max_frames: int | None = None, preset: str = "fast") -> np.ndarray:
+           max_frames: int | None = None, preset: str = "fast", precision: str = "auto") -> np.ndarray:
     """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8 (``deblock``: :attr:`Decoder.deblock`;
-    ``preset``: the networks' weights, :attr:`Decoder.preset`);
+    ``preset``: the networks' weights, :attr:`Decoder.preset`; ``precision``: theirs,
+    :attr:`Decoder.precision`);
     ``first_frame``, ``max_frames``: a range of the stream's frames (:func:`iter_decode`:
     the same bytes as those frames of a whole decode).
 
@@ -559,7 +569,7 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
     frames: list[np.ndarray] = []
     try:
         for f in iter_decode(buf, depth, occlusion, limits, hance=hance, device=device, deblock=deblock, out=out,
-                             first_frame=first_frame, max_frames=max_frames, preset=preset):
+                             first_frame=first_frame, max_frames=max_frames, preset=preset, precision=precision):
             frames.append(f.lf)
     except BitstreamError as exc:
         exc.partial = frames_array(frames, out) if frames else None  # type: ignore[attr-defined]
@@ -604,9 +614,9 @@ def frames_array(frames: list[np.ndarray], out: np.ndarray | None) -> np.ndarray
 
 def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | None = None,
                 hance: str = "auto", device: str = "cpu", first_frame: int = 0,
-                preset: str = "fast") -> tuple[np.ndarray, float]:
-    """Decodes an ``.lfs`` file (from frame ``first_frame``, :func:`iter_decode`; ``preset``:
-    the networks' weights, :attr:`Decoder.preset`); returns ``(lf, fps)``."""
+                preset: str = "fast", precision: str = "auto") -> tuple[np.ndarray, float]:
+    """Decodes an ``.lfs`` file (from frame ``first_frame``, :func:`iter_decode`; ``preset``,
+    ``precision``: the networks' weights and precision, :class:`Decoder`'s); returns ``(lf, fps)``."""
     path = Path(path)
     check_first_frame(first_frame)
     with _errors_naming(path), open(path, "rb") as fh:
@@ -615,7 +625,8 @@ def decode_file(path: str | os.PathLike, depth: str = "auto", max_frames: int | 
         out = video_array(header, frames_in_range(count, first_frame, max_frames, path) if count else 0)
         fh.seek(0)
         frames = [f.lf for f in iter_decode(fh, depth=depth, max_frames=max_frames, hance=hance, device=device,
-                                            out=out, first_frame=first_frame, preset=preset)]
+                                            out=out, first_frame=first_frame, preset=preset,
+                                            precision=precision)]
     if not frames:
         raise BitstreamError(f"{path}: stream holds no frames")
     return frames_array(frames, out), header.fps

@@ -678,6 +678,35 @@ def test_decode_networks_picks_the_shipped_weights(capsys, tmp_path):
         lfstream.decode(data, preset="best")
 
 
+def test_decode_precision_is_the_networks_inference(capsys, tmp_path):
+    """``decode --precision float32|bfloat16`` gives ``lfstream.decode(..., precision=)``'s
+    bytes, the two differing where JPEG-Hance runs (a level here and there); ``auto`` is one
+    of them; anything else is refused by argparse (status 2) and by the library."""
+    import lfstream
+    from lfstream.errors import LFValueError
+    from lfstream.models.device import native_bfloat16
+
+    lf = synth_clip(1, 3, (40, 56), seed=3).lf[0]
+    data = lfstream.encode(lf, preset="fast")
+    (tmp_path / "a.lfs").write_bytes(data)
+    got = {}
+    for precision in ("float32", "bfloat16", "auto"):
+        code, _, _ = run(capsys, "decode", tmp_path / "a.lfs", "-o", tmp_path / f"{precision}.npy", "--hance", "on",
+                         "--depth", "net", "--precision", precision)
+        assert code == 0
+        got[precision] = np.load(tmp_path / f"{precision}.npy")
+    for precision in ("float32", "bfloat16"):
+        assert np.array_equal(got[precision], lfstream.decode(data, hance="on", depth="net", precision=precision))
+    assert not np.array_equal(got["float32"], got["bfloat16"])
+    assert np.abs(got["float32"].astype(np.int16) - got["bfloat16"]).max() <= 2
+    assert np.array_equal(got["auto"], got["bfloat16" if native_bfloat16("cpu") else "float32"])
+    with pytest.raises(SystemExit) as exc:
+        run(capsys, "decode", tmp_path / "a.lfs", "-o", tmp_path / "x.npy", "--precision", "half")
+    assert exc.value.code == 2 and not (tmp_path / "x.npy").exists()
+    with pytest.raises(LFValueError, match="precision"):
+        lfstream.decode(data, precision="half")
+
+
 @pytest.mark.parametrize("name", ["clip.avi", "clip.npy", "clip.npz", "clipdir", "clip.mkv"])
 def test_convert_writes_the_same_frames_in_another_format(capsys, tmp_path, name):
     """``convert`` of a lossless .mp4 mosaic video (read frame by frame) to each format:

@@ -283,7 +283,7 @@ def test_hance_auto_on_cpu_leaves_the_fast_network_off_and_on_filters_first(monk
     import lfstream.models.jpeg_hance as jh
 
     real = jh.restore_images
-    monkeypatch.setattr(jh, "restore_images", lambda images, model, device="cpu": seen.append(images.copy())
+    monkeypatch.setattr(jh, "restore_images", lambda images, model, device="cpu", precision="auto": seen.append(images.copy())
                         or real(images, model, device))
     Decoder(header, hance="on", deblock=False).decode_centres([packet])
     raw = decode_jpeg(packet.image, header.size)
