@@ -200,6 +200,16 @@ class Decoder:
         return self.uses_hance or self.uses_depth_net
 
     @property
+    def network_precision(self) -> str | None:
+        """What the networks' inference runs in here, ``"float32"`` or ``"bfloat16"``
+        (:attr:`precision` resolved on :attr:`device`); ``None`` where no network runs."""
+        if not self.runs_networks:
+            return None
+        from lfstream.models.device import inference_bfloat16
+
+        return "bfloat16" if inference_bfloat16(self.device, self.precision) else "float32"
+
+    @property
     def estimates_depth(self) -> bool:
         """Whether frames get a disparity of their own (hint or Depth-Net), not flat."""
         return self.depth in ("hint", "net") or (self.depth == "auto" and self.header.has_hint)

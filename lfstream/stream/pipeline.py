@@ -246,7 +246,10 @@ class Pipeline:
             focal_planes=refocuser.planes() if refocuser is not None else [],
             plane_updates=refocuser.updates if refocuser is not None else [],
             hance={"mode": cfg.hance, "networks": cfg.networks,
-                   "ran": bool(decoder is not None and decoder.decoder is not None and decoder.decoder.uses_hance)},
+                   "ran": bool(decoder is not None and decoder.decoder is not None and decoder.decoder.uses_hance),
+                   # the precision the decoder's networks (JPEG-Hance, Depth-Net) ran in, or None
+                   "precision": decoder.decoder.network_precision
+                   if decoder is not None and decoder.decoder is not None else None},
             interrupted=self.interrupted,
             outputs=sink.sink.files if sink is not None and sink.sink is not None else [],
         )

@@ -136,7 +136,8 @@ def stopped_summary(transport: str) -> dict:
     summary, nothing done, ``interrupted`` true."""
     return build_summary(wall_s=0.0, frames=0, stages={}, rate=RateStats(), quality=QualityStats(),
                          static=StaticSkipStats(enabled=False), planes=PlaneSkipStats(enabled=False), receive=None,
-                         transport=transport, refocus=None, hance={"mode": None, "networks": None, "ran": False},
+                         transport=transport, refocus=None,
+                         hance={"mode": None, "networks": None, "ran": False, "precision": None},
                          interrupted=True, outputs=[])
 
 

@@ -4,6 +4,7 @@ Tolerances: reconstructions are compared bit-exactly where the same packets are 
 (decoding is deterministic); MPSNR values across transports agree exactly.
 """
 
+import dataclasses
 import json
 import socket
 import struct
@@ -560,7 +561,12 @@ def test_the_streams_decoder_runs_the_networks_preset_named(tmp_path):
     frames = list(synthetic_source(frames=1, views=3, size=(40, 56), seed=2, cache=False))
     config = StreamConfig(refocus="sas", save=(), hance="on", networks="paper", mssim_every=0, transport="file")
     summary = Pipeline(iter(frames), config, None, stream_file=tmp_path / "stream.lfs").run()
-    assert summary["skips"]["jpeg_hance"] == {"mode": "on", "networks": "paper", "ran": True}
+    from lfstream.models.device import native_bfloat16
+
+    assert summary["skips"]["jpeg_hance"] == {"mode": "on", "networks": "paper", "ran": True,
+                                              "precision": "bfloat16" if native_bfloat16("cpu") else "float32"}
+    plain = Pipeline(iter(frames), dataclasses.replace(config, hance="off"), None, stream_file=tmp_path / "off.lfs").run()
+    assert plain["skips"]["jpeg_hance"] == {"mode": "off", "networks": "paper", "ran": False, "precision": None}
     data = (tmp_path / "stream.lfs").read_bytes()
     assert summary["mpsnr"] == pytest.approx(mpsnr(frames[0], lfstream.decode(data, hance="on", preset="paper")[0]),
                                              abs=1e-6)
