@@ -29,7 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
     p.add_argument("--networks", choices=NETWORK_PRESETS, default="fast",
                    help="the networks' shipped weights: fast, or paper (JPEG-Hance at the seed's size: better, "
-                   "about 0.6 s a 375x540 view on a 2-core CPU, milliseconds on a GPU; no Depth-Net ships)")
+                   "about 0.4 s a 375x540 view on a 2-core CPU in bfloat16, 0.7 s in float32, milliseconds on a GPU; "
+                   "no Depth-Net ships)")
     p.add_argument("--precision", choices=PRECISIONS, default="auto",
                    help="the networks' inference: auto (bfloat16 on a CPU with native bfloat16, as AVX512-BF16; "
                    "float32 elsewhere), float32 (the bytes of a float32 machine, e.g. for regression tests "
