@@ -125,10 +125,9 @@ class Decoder:
     precision: str = "auto"
 
     def __post_init__(self) -> None:
-        from lfstream.models.device import PRECISIONS  # torch-free
+        from lfstream.models.device import check_precision  # torch-free
 
-        if self.precision not in PRECISIONS:
-            raise LFValueError(f"precision: one of {', '.join(PRECISIONS)}, got {self.precision!r}")
+        check_precision(self.precision)
         if self.depth not in DEPTH_MODES:
             raise LFValueError(f"depth: one of {', '.join(DEPTH_MODES)}, got {self.depth!r}")
         if self.hance not in HANCE_MODES:

@@ -38,11 +38,17 @@ def native_bfloat16(device: str) -> bool:
     return bool(capabilities.get("avx512_bf16") or capabilities.get("amx_bf16"))
 
 
+def check_precision(precision: str) -> str:
+    """A ``precision`` of :data:`PRECISIONS`, or a clear error (torch is not imported)."""
+    if precision not in PRECISIONS:
+        raise LFValueError(f"precision: one of {', '.join(PRECISIONS)}, got {precision!r}")
+    return precision
+
+
 def inference_bfloat16(device: str, precision: str = "auto") -> bool:
     """Whether inference on ``device`` runs in bfloat16 for a ``precision`` of
     :data:`PRECISIONS`."""
-    if precision not in PRECISIONS:
-        raise LFValueError(f"precision: one of {', '.join(PRECISIONS)}, got {precision!r}")
+    check_precision(precision)
     return precision == "bfloat16" or (precision == "auto" and native_bfloat16(device))
 
 
@@ -64,4 +70,4 @@ def inference_precision(device: str, precision: str = "auto") -> Iterator[bool]:
         yield True
 
 
-__all__ = ["PRECISIONS", "check_device", "inference_bfloat16", "inference_precision", "native_bfloat16"]
+__all__ = ["PRECISIONS", "check_device", "check_precision", "inference_bfloat16", "inference_precision", "native_bfloat16"]
