@@ -204,15 +204,52 @@ def test_the_default_encode_marks_its_jpeg_frames_and_the_option_is_checked(clip
         lfstream.encode(lf, bpp=0.05, hance_map=True)
 
 
-def test_the_squared_error_kernel_equals_numpy_over_the_views_present(rng):
-    from lfstream.codec._kernels import squared_error_map
+def test_the_strength_terms_kernel_equals_numpy_over_the_views_present(rng):
+    from lfstream.codec._kernels import strength_error_terms
 
-    a, b = rng.integers(0, 256, (2, 3, 4, 9, 11, 3), dtype=np.uint8)
+    plain, restored, ref = rng.integers(0, 256, (3, 3, 4, 9, 11, 3), dtype=np.uint8)
     present = rng.random((3, 4)) < 0.6
-    out = np.full((9, 11), -1, np.int64)
-    squared_error_map(a, b, present, out)
-    want = np.square(a[present].astype(np.int64) - b[present]).sum(axis=(0, 3))
-    np.testing.assert_array_equal(out, want)
+    cross, square = np.full((2, 9, 11), -1, np.int64)
+    strength_error_terms(plain, restored, ref, present, cross, square)
+    p, r, t = (a[present].astype(np.int64) for a in (plain, restored, ref))
+    np.testing.assert_array_equal(cross, ((p - t) * (r - p)).sum(axis=(0, 3)))
+    np.testing.assert_array_equal(square, np.square(r - p).sum(axis=(0, 3)))
+
+
+def test_the_measured_levels_are_the_blend_and_warp_per_level_within_rounding(clip_lf):
+    """The quadratic in the strength (two warps) against the search it replaces (a blend and
+    a warp per level, each rounded to 8 bits): the same level on nine tiles in ten, and
+    every tile's level within 2 % of the best level's error."""
+    from lfstream.codec.bitstream import iter_packets, read_header
+    from lfstream.codec.decoder import Decoder
+    from lfstream.codec.jpeg import blend_restored
+    from lfstream.codec.warp import warp_views
+
+    lf = clip_lf[0]
+    data = lfstream.encode(lf, quality=30, preset="fast")
+    fh = io.BytesIO(data)
+    header = read_header(fh)
+    dec = Decoder(header, hance="off")
+    frame = dec.decode_packet(next(iter_packets(fh, header)))
+    rng = np.random.default_rng(5)  # a 'restored' centre that helps some tiles and hurts others
+    truth = lf[2, 2].astype(np.int16)
+    towards = frame.centre + (truth - frame.centre) * rng.uniform(-0.5, 1.5, (1, 96, 1))
+    restored = np.clip(np.rint(towards), 0, 255).astype(np.uint8)
+    args = (frame.disparity, frame.axes, frame.gains)
+    levels = measure_hance_map(lf, frame.centre, restored, *args, tiles=8, occlusion=dec.occlusion, warped=frame.lf)
+    rows, cols = tile_edges(64, 8), tile_edges(96, 8)
+    errors = []
+    for level in range(HANCE_LEVELS + 1):
+        warped = warp_views(blend_restored(frame.centre, restored, level / HANCE_LEVELS), frame.disparity, (5, 5),
+                            occlusion=dec.occlusion, gains=frame.gains, axes=frame.axes)
+        err = np.square(warped.astype(np.int64) - lf).sum(axis=(0, 1, 4))
+        errors.append(np.add.reduceat(np.add.reduceat(err, rows[:-1], axis=0), cols[:-1], axis=1))
+    errors = np.stack(errors)
+    chosen = np.take_along_axis(errors, levels[None].astype(np.int64), axis=0)[0]
+    assert len(np.unique(levels)) >= 3  # the case measures a choice, not one end
+    # a level moves only between near ties (here 1 tile of 64, 1.3 % over the best)
+    assert (levels == errors.argmin(axis=0)).mean() >= 0.9
+    assert (chosen <= errors.min(axis=0) * 1.02 + 1).all()
 
 
 def test_the_default_encode_of_views_it_codes_as_a_sequence_sends_no_map():
