@@ -48,7 +48,8 @@ guided by the decoded centre view (edges of the depth follow edges of the pictur
 from __future__ import annotations
 
 import struct
-from concurrent.futures import Future
+import threading
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -233,13 +234,16 @@ def sweep_views(u: int, v: int, present: np.ndarray | None = None) -> list[tuple
     return keys
 
 
-def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int) -> np.ndarray:
+def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int, out: np.ndarray | None = None) -> np.ndarray:
     """Luma of the views ``keys`` as means of ``scale x scale`` blocks, in [0, 1]: OpenCV's
     8-bit grey conversion, then block means (:func:`lfstream.codec._kernels.block_means`;
     float, not uint8: block means keep the sub-level precision the sub-pixel fit needs).
     OpenCV converts with SIMD on its threads: the 13 views a 7x7 frame sweeps in 1.9 ms
     (lytro_bikes; translucent 2.4) against 2.2 (3.2) for a numba kernel that converted and
     averaged in one pass, the same values to the bit (minimum of 40 interleaved calls).
+
+    Args:
+        out: where to write them (float32 of the output's shape); ``None``: a new array.
 
     Shape:
         - lf: ``(U, V, H, W, 3)`` uint8, C-contiguous
@@ -251,7 +255,8 @@ def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int) -> np.ndarra
     grey = np.empty((len(keys), h, w), np.uint8)
     for n, (a, b) in enumerate(keys):
         cv2.cvtColor(lf[a, b], cv2.COLOR_RGB2GRAY, dst=grey[n])
-    out = np.empty((len(keys), max(1, h // scale), max(1, w // scale)), np.float32)
+    if out is None:
+        out = np.empty((len(keys), max(1, h // scale), max(1, w // scale)), np.float32)
     block_means(grey, scale, out)
     return out
 
@@ -279,6 +284,35 @@ def sweeps_on_device(device: str | None) -> bool:
     return device is not None and str(device).startswith("cuda")
 
 
+#: The hint's per-frame working arrays (the views' luma, its high-pass, a sweep's cost volume)
+#: are kept by the thread that makes them for its next frame, each up to this size: glibc's
+#: largest dynamic mmap threshold, above which it maps every chunk afresh anyway (larger ones
+#: are made anew, so the memory held for good stays bounded: 11 MB for a 7x7x375x540 frame).
+KEPT_ARRAY_MAX_BYTES = 32 << 20
+_kept = threading.local()
+
+
+def _kept_array(name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """An uninitialised float32 array of ``shape`` that must not outlive the call making it:
+    the calling thread's kept buffer ``name`` where it is at most
+    :data:`KEPT_ARRAY_MAX_BYTES`. Made afresh each frame, these were the encode's largest
+    temporaries (lytro_bikes: a 5.7 MB cost volume, 2.6 MB of luma twice), and glibc, whose
+    trim threshold is twice the largest chunk a process has freed, returned them to the
+    kernel after each frame in a process that had freed nothing larger: 2,200-2,600 page
+    faults an encode, none kept (a loop of ``lfstream.encode`` on the 2-core Zen 5 EPYC:
+    lytro_bikes 13.8 -> 12.5 ms, 23.4 -> 19.6 ms of CPU; lytro_translucent 19.7 -> 13.3;
+    dino 20.0 -> 13.4; a video of dino's 64 MB frames, which glibc maps afresh, 8.6 -> 6.3-7.1
+    ms a frame). Library code does not set the process's allocator; it keeps its own buffers."""
+    size = int(np.prod(shape))
+    if size * 4 > KEPT_ARRAY_MAX_BYTES:
+        return np.empty(shape, np.float32)
+    buf = getattr(_kept, name, None)
+    if buf is None or buf.size < size:
+        buf = np.empty(size, np.float32)
+        setattr(_kept, name, buf)
+    return buf[:size].reshape(shape)
+
+
 def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale: int, options: HintOptions,
            max_candidates: int = 128, device: str | None = None) -> np.ndarray:
     """Disparity (px of the full view per view step) at the resolution of ``images``; on a
@@ -296,7 +330,7 @@ def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale:
         from lfstream.codec.sweep_batched import sweep_batched
 
         return sweep_batched(images, offsets, cands, scale, options.box_radius, device)
-    cost = np.empty((len(cands), *images.shape[1:]), np.float32)
+    cost = _kept_array("cost", (len(cands), *images.shape[1:]))
     sweep_cost(images, offsets, cands / np.float32(scale), cost)
     r = options.box_radius
     if r:
@@ -512,7 +546,8 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
         return HintMap(np.zeros((hs, ws), np.float32), s, (0.0, 0.0), identity if axes is None else axes)
     centre = (u // 2, v // 2)
     steps = np.asarray([(a - centre[0], b - centre[1]) for a, b in keys], np.float64)
-    grids = _grids(frame, [centre, *keys], work)
+    grids = _grids(frame, [centre, *keys], work, out=_kept_array("grids", (1 + len(keys), max(1, h // work),
+                                                                           max(1, w // work))))
     f = s // work
     ring_luma = None
     if keep_ring_luma:
@@ -532,8 +567,18 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
         use = _axes_views(keys, u, v, present)
         detection = beside(lambda: _detect_axes(grids, steps, use, work))
     guess = identity if axes is None else np.asarray(axes, np.float32)
-    high_passed = _high_pass(grids.copy()) if detection is not None else None
-    lo, hi, work_map, grid_offsets = _sweeps(grids, high_passed, keys, (u, v), guess, work, options, search, device)
+    try:
+        high_passed = None
+        if detection is not None:  # the detection reads the plain grids meanwhile
+            high_passed = _kept_array("high_passed", grids.shape)
+            np.copyto(high_passed, grids)
+            _high_pass(high_passed)
+        lo, hi, work_map, grid_offsets = _sweeps(grids, high_passed, keys, (u, v), guess, work, options, search,
+                                                  device)
+    except BaseException:
+        if detection is not None:  # done with this thread's kept grids before they are reused
+            wait([detection])
+        raise
     if detection is not None:
         axes = np.asarray(detection.result(), np.float32)
         if not np.array_equal(axes, guess):

@@ -604,3 +604,30 @@ def test_a_map_past_the_swept_range_still_gets_a_grid_that_covers_it():
     rec = lfstream.decode(lfstream.encode(lf, quality=1, depth_hint=True))
     assert rec.shape == (1, *lf.shape) and rec.dtype == np.uint8
 
+
+
+def test_kept_working_arrays_are_per_thread_bounded_and_leave_no_trace_between_frames():
+    """The sweep's kept buffers (H._kept_array): reused by one thread, never shared with
+    another, none above the bound; and a frame's hint is the same whatever the thread swept
+    before it (a larger frame, another scene)."""
+    import threading
+
+    a = H._kept_array("test", (3, 4, 5))
+    b = H._kept_array("test", (2, 5, 5))
+    assert a.dtype == np.float32 and a.shape == (3, 4, 5) and b.shape == (2, 5, 5)
+    assert np.shares_memory(a, b)  # the same buffer, reused
+    other = []
+    worker = threading.Thread(target=lambda: other.append(H._kept_array("test", (3, 4, 5))))
+    worker.start()
+    worker.join()
+    assert not np.shares_memory(a, other[0])
+    big = (H.KEPT_ARRAY_MAX_BYTES // 4 + 1,)
+    assert not np.shares_memory(H._kept_array("test", big), H._kept_array("test", big))
+
+    small = synth_clip(1, 5, (48, 64), seed=21, motion=0, camera_pan=0).lf[0]
+    large = synth_clip(1, 7, (96, 128), seed=22, motion=0, camera_pan=0).lf[0]
+    first = H.estimate_hint_map(small)
+    H.estimate_hint_map(large)  # fills the kept buffers with another scene, larger
+    again = H.estimate_hint_map(small)
+    np.testing.assert_array_equal(again.disparity, first.disparity)
+    assert again.search == first.search
