@@ -12,6 +12,10 @@ hint refiner (:func:`refiner_batch_loss`).
     python tools/train.py all --preset fast --device cuda --out runs/fast --ship
     python tools/train.py depth_net --steps 4000 --resume --out runs/fast
     python tools/train.py jpeg_hance --init shipped --out runs/lf --ship
+    # JPEG-Hance fast as shipped (12 min on the 2-core CPU), and the share of its correction
+    # it applies (HanceConfig.strength; three folds, 38 min): each training scene left out
+    python tools/train.py jpeg_hance --preset fast --out runs/fast-hance --ship
+    python tools/hance_strength.py --out runs/hance_strength
     # JPEG-Hance paper as shipped (47 min on the 2-core CPU; --steps sets both phases' steps,
     # so the phases run apart here: 3,000 and 800)
     python tools/train.py jpeg_hance --preset paper --objective image --steps 3000 --out runs/paper
@@ -678,7 +682,8 @@ def train_real_hance(recipe: Recipe, out: Path, device: str, resume: bool, check
     views = real_views(recipe.scenes)
     print(f"{recipe.model}: {len(views)} real views of {', '.join(recipe.scenes)}", flush=True)
     samples = real_depth_samples(recipe.scenes, recipe.qualities) if recipe.objective == "lf" else []
-    model = spec(recipe.model, recipe.preset).build().to(device)
+    shipped = spec(recipe.model, recipe.preset).config
+    model = spec(recipe.model, recipe.preset).build(strength=1.0).to(device)  # trains the whole correction
     if init is not None:
         model.load_state_dict(init.state_dict())
     run = Run(out, recipe, model, resume)
@@ -698,6 +703,7 @@ def train_real_hance(recipe: Recipe, out: Path, device: str, resume: bool, check
     t0 = time.perf_counter()
     run_steps(run, batch_loss, checkpoint_every)
     model.eval()
+    model.config = shipped  # the preset's strength, as it runs (and is saved)
     metrics = {f"{'train_' if name in recipe.scenes else ''}{name}_q50_psnr_gain_db":
                round(_hance_gain(model, view, 50, device), 3) for name, view in real_centre_views()}
     return finish_run(run, metrics, t0, device)
@@ -738,7 +744,12 @@ def main(argv: list[str] | None = None) -> int:
                    help="start from these weights (a checkpoint this tool wrote, or the shipped ones); "
                         "JPEG-Hance then runs only the phase --objective names")
     p.add_argument("--ship", action="store_true", help="write the final weights into lfstream/weights/")
+    p.add_argument("--scenes", help="comma-separated real scenes the real-data phases train on (default: "
+                   f"{','.join(HANCE_TRAIN_SCENES)}; tools/hance_strength.py leaves one out)")
     args = p.parse_args(argv)
+    unknown = [x for x in (args.scenes or "").split(",") if x and x not in SHARED_SCENES]
+    if unknown:
+        p.error(f"--scenes: {', '.join(unknown)} not among {', '.join(SHARED_SCENES)}")
     names = list(MODEL_NAMES) if args.model == "all" else [args.model]
     if args.init and (names != ["jpeg_hance"] or not spec("jpeg_hance", args.preset).config.after_deblock):
         p.error("--init: only jpeg_hance (trained on real views) starts from given weights")
@@ -753,6 +764,7 @@ def _train_all(args: argparse.Namespace, names: list[str]) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(max(1, os.cpu_count() or 1))
     hance = None
+    scenes = tuple(x for x in (args.scenes or "").split(",") if x)
     for name in names:
         recipe = Recipe(model=name, preset=args.preset, steps=args.steps or DEFAULT_STEPS[name],
                         batch=args.batch or DEFAULT_BATCH[name], lr=args.lr or 1e-3, crop=DEFAULT_CROP[name],
@@ -760,14 +772,14 @@ def _train_all(args: argparse.Namespace, names: list[str]) -> int:
         init, init_record = _initial_weights(name, args.preset, args.init, args.device) if args.init else (None, None)
         phases = [recipe]
         if name == "jpeg_hance" and spec(name, args.preset).config.after_deblock:
-            image = replace(recipe, data="real", scenes=HANCE_TRAIN_SCENES, qualities=HANCE_QUALITIES,
+            image = replace(recipe, data="real", scenes=scenes or HANCE_TRAIN_SCENES, qualities=HANCE_QUALITIES,
                             steps=args.steps or 4000, batch=args.batch or 16)
             lf = replace(image, **{**HANCE_LF_PHASE, "steps": args.steps or HANCE_LF_PHASE["steps"],
                                    "batch": args.batch or HANCE_LF_PHASE["batch"],
                                    "lr": args.lr or HANCE_LF_PHASE["lr"]})
             phases = [image] if args.objective == "image" else [lf] if init is not None else [image, lf]
         if name == "depth_net" and args.preset == "fast":  # the hint refiner, on real scenes
-            phases = [replace(recipe, data="real", scenes=DEPTH_TRAIN_SCENES, qualities=DEPTH_QUALITIES,
+            phases = [replace(recipe, data="real", scenes=scenes or DEPTH_TRAIN_SCENES, qualities=DEPTH_QUALITIES,
                               steps=args.steps or 3000, batch=args.batch or 8, crop=128, views=8, samples=0,
                               **DEPTH_REFINER_LOSS)]
         elif name == "depth_net" and hance is None:

@@ -42,19 +42,18 @@ HANCE_MODES = ("auto", "on", "off")
 # "auto" runs JPEG-Hance only up to this JPEG quality per preset, where it was measured to
 # beat what it replaces. Both presets are trained on real views after the post-filter, then
 # fine-tuned on the decoded LF, and judged on scenes they were not trained on (seahorse,
-# cotton, lytro_translucent; bench/networks.py). fast: over the post-filter on their centre
-# views +0.07..+0.90 dB at q10..q60 (SSIM +0.0002..+0.0021), +0.05..+0.50 at q70, -0.84..+0.34
-# at q90; on the decoded LF at q30/50/70 seahorse +0.17/-0.07/-0.21 dB, cotton and
-# lytro_translucent +0.04..+0.32 (2026-11-24). paper (2026-11-27): centre views +0.19..+1.65
+# cotton, lytro_translucent; bench/networks.py). fast (four blocks at 0.617 of their trained
+# correction, 2026-11-28): on the decoded LF at q30/40/50/60/70/80/90 seahorse +0.29/+0.33/
+# +0.22/+0.27/+0.20/+0.26/+0.01 dB, cotton +0.25..+0.32, lytro_translucent +0.12/+0.11/+0.11/
+# +0.10/+0.09/+0.07/+0.04, MSSIM higher on each (the two-block network it replaced lost on
+# seahorse from q50: -0.07 / -0.21 dB at q50 / q70). paper (2026-11-27): centre views +0.19..+1.65
 # dB at q10..q60, -0.00..+0.70 at q70, -1.39..+0.17 at q90; the decoded LF at q30/50/70
 # seahorse +0.53/+0.30/-0.04 dB, cotton +0.68/+0.65/+0.60, lytro_translucent +0.32/+0.22/+0.10.
-HANCE_MAX_QUALITY = {"fast": 60, "paper": 60}
-#: Presets "auto" runs on a CUDA device only: on the 2-core CPU the fast network costs
-#: 84-107 ms a 375 x 540 view on the Zen 3 machine (two threads; 90 ms in its manifest entry),
-#: about twice the rest of a 7x7 decode (~45 ms); on the Zen 5 one 27-35 ms (its activations
-#: in place, the view in row strips), still about twice the rest of the decode (~15 ms), and
-#: the paper one 0.6 s; in bfloat16 (lfstream.models.device, where the CPU has it) 24-32 ms
-#: and 0.39 s, still more than the rest of the decode;
+HANCE_MAX_QUALITY = {"fast": 80, "paper": 60}
+#: Presets "auto" runs on a CUDA device only: on the 2-core Zen 5 CPU the fast network costs
+#: 51 ms a 375 x 540 view in bfloat16 (lfstream.models.device, where the CPU has it; 85 ms in
+#: float32), three times the rest of a 7x7 decode (~15 ms, half HEVC's: issue #15's decode
+#: target), and the paper one 0.41 s;
 #: ``hance="on"`` runs it anywhere, and "auto" too on a stream with the encoder's strength maps
 #: (:data:`lfstream.codec.hance.HANCE_MAP_PRESET`), whose encoder measured where it helps.
 HANCE_AUTO_GPU_ONLY = ("fast", "paper")

@@ -121,6 +121,27 @@ def test_untrained_hance_is_identity_and_function_matches_module():
         jpeg_hance(torch.rand(4, 8, 8), model)
 
 
+def test_hance_strength_scales_the_trained_correction():
+    """HanceConfig.strength: the output moves from the input by that share of the full-strength
+    correction (where nothing clips); 0 returns the input; the fast preset's share is in (0, 1]."""
+    from dataclasses import replace
+
+    from lfstream.models.jpeg_hance import HANCE_PRESETS, JPEGHance
+
+    torch.manual_seed(1)
+    full = JPEGHance(replace(HANCE_PRESETS["fast"], strength=1.0)).eval()
+    with torch.no_grad():
+        for p in full.head.parameters():
+            p.normal_(0, 0.02)
+        x = 0.25 + 0.5 * torch.rand(2, 3, 17, 21)  # away from 0 and 1: no clipping
+        correction = full(x) - x
+        assert correction.abs().max() > 1e-3
+        for share in (0.0, 0.4, 0.75):
+            full.config = replace(full.config, strength=share)
+            torch.testing.assert_close(full(x) - x, share * correction, atol=2e-6, rtol=1e-4)
+    assert 0.0 < HANCE_PRESETS["fast"].strength <= 1.0
+
+
 @pytest.mark.parametrize("precision", ["float32", "bfloat16"])
 @pytest.mark.parametrize("preset", ["fast", "paper"])
 def test_hance_in_strips_is_the_whole_forward_pass(preset, precision, monkeypatch, rng):
@@ -278,21 +299,27 @@ def test_shipped_hance_beats_the_post_filter_on_held_out_scenes(folder):
     assert ssim(view, out) > ssim(view, filt) - 1e-3
 
 
-def test_shipped_hance_gains_on_the_decoded_light_field_of_a_held_out_scene():
-    """What JPEG-Hance fast is fine-tuned for (tools/train.py, objective "lf"): the light
-    field the decoder warps from the restored centre view, not only the centre view."""
+@pytest.mark.slow
+@pytest.mark.parametrize("folder, floor", [(("seahorse5x5", "camImagesFlat"), 0.17), (("hci_star", "cotton"), 0.25),
+                                           (("lytro_translucent",), 0.1)])
+def test_shipped_hance_gains_on_the_decoded_light_field_of_every_held_out_scene(folder, floor):
+    """Issue #17's target for JPEG-Hance fast: on the decoded light field of the default
+    encode (its JPEG centre view, quality 50) of each scene it was not trained on, at least
+    +0.1 dB MPSNR and MSSIM not lower, at the precision the decoder picks on this machine."""
     import lfstream
     from lfstream.metrics import mssim
+    from lfstream.models.registry import manifest_entry
 
-    lf, mask = lfstream.read_lf(shared("hci_star", "cotton"), return_mask=True)  # a 9x9 star: 33 views
-    lf = lf[:, :, 96:288, 128:384]
-    data = lfstream.encode(lf, present=mask, preset="fast")  # a JPEG centre view at the default quality
-    ref = lf[mask][:, None]
-    on, off = (lfstream.decode(data, hance=mode)[0][mask][:, None] for mode in ("on", "off"))
-    # measured on this crop: MPSNR +0.386 dB, MSSIM +0.0026 (the image-trained weights before
-    # the fine-tuning: +0.324 dB, +0.0024; full views +0.31 dB, +0.0015)
-    assert mpsnr(ref, on) > mpsnr(ref, off) + 0.35
-    assert mssim(ref, on) >= mssim(ref, off) + 1e-3
+    assert folder[-1] not in manifest_entry("jpeg_hance", "fast")["recipe"]["scenes"]
+    lf, mask = lfstream.read_lf(shared(*folder), return_mask=True)
+    present = None if mask.all() else mask
+    data = lfstream.encode(lf, present=present, preset="fast")
+    on, off = (lfstream.decode(data, hance=mode)[0] for mode in ("on", "off"))
+    # measured (bfloat16 / float32): seahorse +0.215 / +0.217 dB, cotton +0.294 / +0.293,
+    # lytro_translucent +0.105 / +0.106; MSSIM +0.0002 / +0.0014 / +0.0009
+    assert mpsnr(lf, on, present=mask) > mpsnr(lf, off, present=mask) + floor - 0.005
+    assert mpsnr(lf, on, present=mask) > mpsnr(lf, off, present=mask) + 0.1
+    assert mssim(lf, on, present=mask) > mssim(lf, off, present=mask)
 
 
 def test_shipped_refnet_close_to_sas():

@@ -153,3 +153,27 @@ def test_bad_init_is_one_line_and_status_2(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:  # argparse's error: usage and one line, status 2
         train.main(["refnet", "--init", "shipped", "--out", str(tmp_path)])
     assert exc.value.code == 2 and "--init" in capsys.readouterr().err
+
+
+def test_scenes_option_names_shared_samples(tmp_path, capsys):
+    """``--scenes`` (what tools/hance_strength.py leaves one out of): an unknown scene is
+    argparse's one line and status 2, before anything trains."""
+    with pytest.raises(SystemExit) as exc:
+        train.main(["jpeg_hance", "--scenes", "lytro_bikes,nowhere", "--out", str(tmp_path)])
+    assert exc.value.code == 2 and "nowhere" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_a_phase_trains_on_the_scenes_given_at_full_strength(tmp_path):
+    """``--scenes``: the recipe records the scenes; the network trains its whole correction
+    and is saved with the preset's strength (HanceConfig.strength)."""
+    from tests.conftest import shared
+
+    shared("lytro_bikes")  # skips without the samples
+    assert train.main(["jpeg_hance", "--steps", "1", "--objective", "image", "--scenes", "dino",
+                       "--out", str(tmp_path)]) == 0
+    saved = torch.load(tmp_path / "jpeg_hance-fast.pt", weights_only=False)
+    ckpt = torch.load(tmp_path / "jpeg_hance-fast.ckpt", weights_only=False)
+    assert list(ckpt["recipe"]["scenes"]) == ["dino"]
+    assert saved["config"]["strength"] == spec("jpeg_hance", "fast").config.strength
