@@ -51,8 +51,9 @@ def strength_on(name: str, model, quality: int) -> dict:
     header = read_header(fh)
     decoder = Decoder(header, hance="off")
     frame = decoder.decode_packet(next(iter_packets(fh, header)))
-    model.config = replace(model.config, strength=1.0)  # the whole trained correction
-    restored = restore_images(frame.centre[None], model)[0]
+    full = type(model)(replace(model.config, strength=1.0)).eval()  # the whole trained correction
+    full.load_state_dict(model.state_dict())
+    restored = restore_images(frame.centre[None], full)[0]
     on = warp_views(restored, frame.disparity, lf.shape[:2], occlusion=decoder.occlusion, gains=frame.gains,
                     axes=frame.axes)
     err = lf[present].astype(np.float64) - frame.lf[present]

@@ -4,17 +4,19 @@ the centre view should get, measured on the decoded light field.
 JPEG-Hance (:mod:`lfstream.models.jpeg_hance`) restores the decoded, post-filtered centre
 view; the decoder warps the restored view into every view. Where the hint's residual
 misalignment dominates, a sharper centre view warps further from the true views, so the
-full correction can lose (the fast network on the held-out seahorse: -0.07 dB on the
-decoded LF at q50) while half of it gains (+0.19). The encoder has the original views: it
+full correction can lose (the two-block fast network shipped until 2026-11-28 on the
+held-out seahorse: -0.07 dB on the decoded LF at q50) while half of it gained (+0.19). The encoder has the original views: it
 decodes its own packet, runs the network, and keeps, per tile, the strength level whose
 warp has the smallest squared error over every view (measured from the warps of the plain
 and the restored centre: :func:`measure_hance_map`). The map travels in the
 JPEG (:func:`lfstream.codec.jpeg.with_hance_map`, 16 x 16 tiles: 96 bytes a frame) and the
 decoder blends the correction by it, bilinearly (:func:`lfstream.codec.jpeg.hance_strength`).
-Measured with the shipped weights, the fast preset's encode at q50, on the three scenes the
-network was not trained on, the decoded LF with the map against the post-filter alone:
-seahorse +0.211 dB, cotton +0.317, lytro_translucent +0.112, MSSIM higher on each (the full
-correction: -0.072 / +0.310 / +0.075 dB; 8 x 8 tiles +0.198 / +0.311 / +0.102). Costs the
+Measured with the fast preset's encode at q50, on the three scenes the network was not
+trained on, the decoded LF with the map against the post-filter alone: seahorse +0.260 dB,
+cotton +0.295, lytro_translucent +0.114 with the shipped network (four blocks at 0.617 of
+their correction, the map's top level; without the map +0.215 / +0.294 / +0.105); with the
+two-block network before it +0.211 / +0.317 / +0.112 (its full correction -0.072 / +0.310 /
++0.075 dB; 8 x 8 tiles +0.198 / +0.311 / +0.102). MSSIM higher on each. Costs the
 encoder the hint and gains of every frame (its reference decoder follows the stream), and a
 decode, the network and two warps on the frames it measures (the first and every hint key
 frame): about 70 ms more for a 7x7x375x540 frame on two Zen 5 cores (135 ms with a warp per

@@ -234,7 +234,7 @@ def sweep_views(u: int, v: int, present: np.ndarray | None = None) -> list[tuple
     return keys
 
 
-def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int, out: np.ndarray | None = None) -> np.ndarray:
+def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int, kept: bool = False) -> np.ndarray:
     """Luma of the views ``keys`` as means of ``scale x scale`` blocks, in [0, 1]: OpenCV's
     8-bit grey conversion, then block means (:func:`lfstream.codec._kernels.block_means`;
     float, not uint8: block means keep the sub-level precision the sub-pixel fit needs).
@@ -243,7 +243,8 @@ def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int, out: np.ndar
     averaged in one pass, the same values to the bit (minimum of 40 interleaved calls).
 
     Args:
-        out: where to write them (float32 of the output's shape); ``None``: a new array.
+        kept: into the calling thread's kept buffer (:func:`_kept_array`), for a caller done
+            with them before its next call; else a new array.
 
     Shape:
         - lf: ``(U, V, H, W, 3)`` uint8, C-contiguous
@@ -255,8 +256,8 @@ def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int, out: np.ndar
     grey = np.empty((len(keys), h, w), np.uint8)
     for n, (a, b) in enumerate(keys):
         cv2.cvtColor(lf[a, b], cv2.COLOR_RGB2GRAY, dst=grey[n])
-    if out is None:
-        out = np.empty((len(keys), max(1, h // scale), max(1, w // scale)), np.float32)
+    shape = (len(keys), max(1, h // scale), max(1, w // scale))
+    out = _kept_array("grids", shape) if kept else np.empty(shape, np.float32)
     block_means(grey, scale, out)
     return out
 
@@ -546,8 +547,7 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
         return HintMap(np.zeros((hs, ws), np.float32), s, (0.0, 0.0), identity if axes is None else axes)
     centre = (u // 2, v // 2)
     steps = np.asarray([(a - centre[0], b - centre[1]) for a, b in keys], np.float64)
-    grids = _grids(frame, [centre, *keys], work, out=_kept_array("grids", (1 + len(keys), max(1, h // work),
-                                                                           max(1, w // work))))
+    grids = _grids(frame, [centre, *keys], work, kept=True)
     f = s // work
     ring_luma = None
     if keep_ring_luma:
