@@ -36,7 +36,7 @@ from torch import nn
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import to_network_input
 from lfstream.models.device import inference_precision
-from lfstream.models.layers import ELU, Bottleneck, count_params
+from lfstream.models.layers import ELU, Bottleneck, add_, count_params
 
 
 @dataclass(frozen=True)
@@ -132,8 +132,8 @@ class DepthNet(nn.Module):
         y = feats[-1]
         for up, level in zip(self.up, self.skip_index):
             y = up(y)
-            if level >= 0:
-                y = y + feats[level]
+            if level >= 0:  # at inference the sum into the up-sampling's fresh output
+                y = y + feats[level] if torch.is_grad_enabled() and y.requires_grad else add_(y, feats[level])
         d = torch.tanh(self.head(y)) * cfg.max_disparity
         if cfg.out_stride > 1:
             d = F.interpolate(d, scale_factor=cfg.out_stride, mode="bilinear", align_corners=False)

@@ -25,7 +25,7 @@ from torch import nn
 from lfstream.errors import LFShapeError
 from lfstream.lightfield import to_network_input
 from lfstream.models.device import inference_precision
-from lfstream.models.layers import ELU, Bottleneck, count_params
+from lfstream.models.layers import ELU, Bottleneck, add_, count_params
 
 
 @dataclass(frozen=True)
@@ -100,7 +100,10 @@ class JPEGHance(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         s = x * 2 - 1
         f = self.stem(s)
-        r = torch.tanh(self.head(self.body(f) + f))  # long skip, bounded correction
+        b = self.body(f)
+        # long skip, bounded correction (at inference the sum into the body's fresh output)
+        b = b + f if torch.is_grad_enabled() and (b.requires_grad or f.requires_grad) else add_(b, f)
+        r = torch.tanh(self.head(b))
         if self.config.strength != 1.0:
             r = r * self.config.strength
         return ((s + r).clamp(-1, 1) + 1) * 0.5
