@@ -51,9 +51,9 @@ HANCE_MODES = ("auto", "on", "off")
 # seahorse +0.53/+0.30/-0.04 dB, cotton +0.68/+0.65/+0.60, lytro_translucent +0.32/+0.22/+0.10.
 HANCE_MAX_QUALITY = {"fast": 80, "paper": 60}
 #: Presets "auto" runs on a CUDA device only: on the 2-core Zen 5 CPU the fast network costs
-#: 51 ms a 375 x 540 view in bfloat16 (lfstream.models.device, where the CPU has it; 85 ms in
-#: float32), three times the rest of a 7x7 decode (~15 ms, half HEVC's: issue #15's decode
-#: target), and the paper one 0.41 s;
+#: 31-34 ms a 375 x 540 view in bfloat16 (lfstream.models.device, where the CPU has it; 49-55
+#: ms in float32), twice the rest of a 7x7 decode (~15 ms, half HEVC's: issue #15's decode
+#: target), and the paper one 0.25 s;
 #: ``hance="on"`` runs it anywhere, and "auto" too on a stream with the encoder's strength maps
 #: (:data:`lfstream.codec.hance.HANCE_MAP_PRESET`), whose encoder measured where it helps.
 HANCE_AUTO_GPU_ONLY = ("fast", "paper")

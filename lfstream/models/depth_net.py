@@ -133,7 +133,7 @@ class DepthNet(nn.Module):
         for up, level in zip(self.up, self.skip_index):
             y = up(y)
             if level >= 0:  # at inference the sum into the up-sampling's fresh output
-                y = y + feats[level] if torch.is_grad_enabled() and y.requires_grad else add_(y, feats[level])
+                y = add_(y, feats[level])
         d = torch.tanh(self.head(y)) * cfg.max_disparity
         if cfg.out_stride > 1:
             d = F.interpolate(d, scale_factor=cfg.out_stride, mode="bilinear", align_corners=False)

@@ -61,7 +61,7 @@ HANCE_PRESETS: dict[str, HanceConfig] = {
     # manifest); no batch norm: its running statistics, taken on textured crops, pushed the
     # mostly black rendered seahorse view to SSIM 0.89 in a held-out test (0.99 without).
     # Four blocks (each output sees 6 pixels around it; two blocks saw 4): 57 ms a 375 x 540
-    # view in bfloat16 on the 2-core Zen 5 against 34. Its correction at 0.617, the mean
+    # view in bfloat16 on the 2-core Zen 5 against 34 (31-34 since lfstream's ELU kernels). Its correction at 0.617, the mean
     # best share on the decoded LF of each training scene left out of a training of the
     # others (tools/hance_strength.py: lytro_bikes 0.637, dino 0.751, toys_array 0.464):
     # at full strength the held-out scenes' decoded LF gained -0.070 / +0.400 / +0.090 dB
@@ -100,10 +100,8 @@ class JPEGHance(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         s = x * 2 - 1
         f = self.stem(s)
-        b = self.body(f)
         # long skip, bounded correction (at inference the sum into the body's fresh output)
-        b = b + f if torch.is_grad_enabled() and (b.requires_grad or f.requires_grad) else add_(b, f)
-        r = torch.tanh(self.head(b))
+        r = torch.tanh(self.head(add_(self.body(f), f)))
         if self.config.strength != 1.0:
             r = r * self.config.strength
         return ((s + r).clamp(-1, 1) + 1) * 0.5

@@ -89,21 +89,21 @@ class Bottleneck(nn.Module):
         self.out_act = activation(act)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        y = self.body(x)
-        if torch.is_grad_enabled() and (y.requires_grad or x.requires_grad):
-            return self.out_act(y + self.skip(x))
-        # inference: the sum into the body's fresh output (a new 24 x 375 x 540 tensor per
-        # block was fresh pages from the kernel: 10 of JPEG-Hance fast's 50 ms a view)
-        return self.out_act(add_(y, self.skip(x)))
+        # at inference the sum goes into the body's fresh output (a new 24 x 375 x 540 tensor
+        # per block was fresh pages from the kernel: 10 of JPEG-Hance fast's 50 ms a view)
+        return self.out_act(add_(self.body(x), self.skip(x)))
 
 
 def add_(y: torch.Tensor, other: torch.Tensor) -> torch.Tensor:
-    """``y + other`` into ``y`` where ``y`` can hold it (same shape and dtype, not a view of
-    ``other``), else a new tensor. For inference, on a ``y`` nothing else reads.
+    """``y + other``: into ``y`` where no gradient is recorded for either and ``y`` can hold
+    the sum (same shape and dtype, not a view of ``other``), else a new tensor (always while
+    autograd records, as in training). For a ``y`` nothing else reads (a layer's fresh output).
 
     Shape:
         - y, other: broadcastable; output: their broadcast shape
     """
+    if torch.is_grad_enabled() and (y.requires_grad or other.requires_grad):
+        return y + other
     if y.shape == torch.broadcast_shapes(y.shape, other.shape) and y.dtype == torch.result_type(y, other) \
             and not (y.untyped_storage().data_ptr() == other.untyped_storage().data_ptr()):
         return y.add_(other)

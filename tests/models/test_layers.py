@@ -73,8 +73,8 @@ def test_the_elu_overwrites_its_input_only_where_no_gradient_is_recorded():
 
 
 def test_add_sums_in_place_only_where_it_can():
-    """add_ writes into its first argument where the sum fits it, else returns a new tensor;
-    the values are those of ``+`` either way."""
+    """add_ writes into its first argument where the sum fits it and no gradient is recorded,
+    else returns a new tensor; the values are those of ``+`` either way."""
     y, other = torch.randn(2, 4, 3, 3), torch.randn(2, 4, 3, 3)
     want = y + other
     out = add_(y, other)
@@ -91,6 +91,12 @@ def test_add_sums_in_place_only_where_it_can():
     want = z + z
     out = add_(z, z)
     assert torch.equal(out, want)
+    leaf = torch.randn(2, 4, 3, 3, requires_grad=True)  # while autograd records: never in place
+    fresh = leaf * 2
+    out = add_(fresh, other)
+    assert out.data_ptr() != fresh.data_ptr() and torch.equal(out, fresh + other)
+    out.sum().backward()
+    assert torch.equal(leaf.grad, torch.full_like(leaf, 2.0))
 
 
 def test_bottleneck_inference_matches_training_forward():
