@@ -287,27 +287,22 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
         # nothing to predict, views a sequence would not carry, or too few cells to tell
         return DefaultChoice(enc, first, None)
     frame8 = np.ascontiguousarray(to_uint8(np.asarray(frame)))
-    coarse = enc.coarser_first_hint() if hint_options is None else None
-    coarse_check = coarse_gains = None
-    if coarse is not None and min(frame.shape[2:4]) // coarse.scale >= PREDICTION_CHECK_MIN_CELLS:
-        # the hint at half the resolution, judged on the same luma: sent where it predicts
-        # the ring as well, for the bytes it saves (coarsening_allowance); measured beside
-        # the full hint's check (its result is used only where that one passes), its
-        # payload coded there once
-        from lfstream.codec.watchdog import in_background
-
-        coarse_check = in_background(lambda: (prediction_psnr(frame8, coarse, enc.last_gains, present,
-                                                              enc.last_ring_luma, grid_scale=enc.last_hint.scale),
-                                              key_payload(coarse)))
-        if enc.last_gains is not None:  # the gains a coarser hint would send, measured meanwhile too
-            coarse_gains = in_background(lambda: measure_gains(frame8, enc.gain_grid, present=present,
-                                                               disparity=coarse.values(), axes=coarse.axes))
     db = prediction_psnr(frame8, enc.last_hint, enc.last_gains, present, enc.last_ring_luma)
-    db_coarse, coarse_payload = (None, b"") if coarse_check is None else coarse_check.result()
     if db >= PREDICTION_FLOOR_DB:
-        if db_coarse is not None:
+        coarse = enc.coarser_first_hint() if hint_options is None else None
+        if coarse is not None and min(frame.shape[2:4]) // coarse.scale >= PREDICTION_CHECK_MIN_CELLS:
+            # the hint at half the resolution, judged on the same luma: sent where it predicts
+            # the ring as well, for the bytes it saves (coarsening_allowance), its payload coded
+            # once here. On this thread after the full hint's check, not beside it on workers:
+            # each check's parallel kernels then had the two cores to themselves (beside, with
+            # the coarser hint's gains, 2.9 against 2.0 ms on lytro_bikes, 2-core Zen 5), and
+            # the coarser hint's gains are measured only where it is sent
+            db_coarse = prediction_psnr(frame8, coarse, enc.last_gains, present, enc.last_ring_luma,
+                                        grid_scale=enc.last_hint.scale)
+            coarse_payload = key_payload(coarse)
             if db - db_coarse <= coarsening_allowance(first, len(coarse_payload)):
-                gains = None if coarse_gains is None else coarse_gains.result()
+                gains = None if enc.last_gains is None else measure_gains(
+                    frame8, enc.gain_grid, present=present, disparity=coarse.values(), axes=coarse.axes)
                 return DefaultChoice(enc, enc.coarsen_first_hint(frame8, first, present, gains, coarse_payload),
                                      db_coarse)
         return DefaultChoice(enc, first, db)
