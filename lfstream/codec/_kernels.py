@@ -1215,3 +1215,89 @@ def gain_samples(lf, ys, xs, d_samples, offsets, scale, out):  # pragma: no cove
                 dst = np.uint64(j) * uc
                 for ch in range(c):
                     out_row[dst + np.uint64(ch)] = np.float32(view[src + np.uint64(ch)]) * scale
+
+
+# The view axes' fit (lfstream.codec.hint._fit_axes) on a few thousand flow samples: as
+# numpy operations on small arrays it took a detection of lytro_bikes' axes from 1.67 to 1.30
+# ms on one thread (2-core Zen 5; the same axes to the bit on the shared captures, flipped
+# and transposed), on the lane whose end the hint waits for. Samples are rows
+# of ``flows``: ``(dy_0, dx_0, dy_1, dx_1, ...)``, one pair per view. fastmath lets the
+# per-sample sums vectorise (2 ns an element without it); they round like numpy's to well
+# under the float32 the axes are returned in.
+_FIT = dict(fastmath=True, cache=True, nogil=True)
+
+
+@numba.njit(**_FIT)
+def axes_moments(flows, weight, n, out):  # pragma: no cover - compiled
+    """``out`` = the weighted second moments ``sum_c weight[c]^2 flows[c] flows[c]^T`` of the
+    first ``n`` samples."""
+    m = flows.shape[1]
+    cols = np.empty((m, n))  # one contiguous row per flow component: the sums below vectorise
+    w2 = np.empty(n)
+    for c in range(n):
+        w2[c] = weight[c] * weight[c]
+        for i in range(m):
+            cols[i, c] = flows[c, i]
+    for i in range(m):
+        for j in range(i + 1):
+            s = 0.0
+            for c in range(n):
+                s += w2[c] * cols[i, c] * cols[j, c]
+            out[i, j] = s
+            out[j, i] = s
+
+
+@numba.njit(**_FIT)
+def axes_residuals(g, flows, n, out):  # pragma: no cover - compiled
+    """``out[c]``: the distance of sample ``c`` (of the first ``n``) from the line along
+    ``g`` (any length but zero; zero is taken as is)."""
+    m = flows.shape[1]
+    norm = np.sqrt(np.sum(g * g))
+    unit = g / (norm if norm > 0.0 else 1.0)
+    for c in range(n):
+        dot = 0.0
+        for i in range(m):
+            dot += unit[i] * flows[c, i]
+        s = 0.0
+        for i in range(m):
+            e = flows[c, i] - unit[i] * dot
+            s += e * e
+        out[c] = np.sqrt(s)
+
+
+@numba.njit(**_FIT)
+def axes_prune(g, flows, weight, n, r, factor, min_kept):  # pragma: no cover - compiled
+    """Drops the samples (of the first ``n``) further from the line along ``g`` than
+    ``factor`` times their median distance (plus 1e-6), compacting ``flows`` and ``weight``
+    in place; returns how many are kept, or 0 (nothing changed) where fewer than
+    ``min_kept`` would be."""
+    axes_residuals(g, flows, n, r)
+    limit = factor * np.median(r[:n]) + 1e-6
+    kept = 0
+    for c in range(n):
+        if r[c] <= limit:
+            kept += 1
+    if kept < min_kept:
+        return 0
+    k = 0
+    for c in range(n):
+        if r[c] <= limit:
+            if k != c:
+                flows[k, :] = flows[c, :]
+                weight[k] = weight[c]
+            k += 1
+    return k
+
+
+@numba.njit(**_FIT)
+def axes_moved(flows, n, change, out):  # pragma: no cover - compiled
+    """``out[c]``: the longest flow of sample ``c`` (of the first ``n``), view ``j``'s
+    length weighted by ``change[j]``."""
+    for c in range(n):
+        best = 0.0
+        for j in range(change.shape[0]):
+            dy, dx = flows[c, 2 * j], flows[c, 2 * j + 1]
+            d = np.sqrt(dy * dy + dx * dx) * change[j]  # np.hypot: 10x the kernel's time
+            if d > best or j == 0:
+                best = d
+        out[c] = best

@@ -395,6 +395,8 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int,
         preset: OpenCV's DIS preset.
         shading_free: the flows on luma divided by its local mean (:func:`_flows`).
     """
+    from lfstream.codec._kernels import axes_moments, axes_moved, axes_prune, axes_residuals
+
     identity = np.eye(2, dtype=np.float32)
     _, h, w = images.shape
     # textured pixels away from the border (where points leave the view) carry the fit
@@ -408,28 +410,30 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int,
         return identity, False
     sel = sel[::-(-sel.size // _AXES_SAMPLES)]
     flows = _flows(images, scale, preset, shading_free)[:, by:h - by, bx:w - bx].reshape(len(steps), -1, 2)[:, sel]
-    f = np.empty((2 * len(steps), sel.size), np.float64)  # rows dy_j, dx_j; one column per pixel
-    f[0::2] = flows[..., 1]
-    f[1::2] = flows[..., 0]
-    weight = np.sqrt(texture[sel])
+    f = np.empty((sel.size, 2 * len(steps)), np.float64)  # one row per pixel: dy_j, dx_j
+    f[:, 0::2] = flows[..., 1].T
+    f[:, 1::2] = flows[..., 0].T
+    weight = np.sqrt(texture[sel]).astype(np.float64)
     if not np.all(np.isfinite(f)):
         return identity, False
     k = np.zeros((2 * len(steps), 4))
     k[0::2, 0:2] = steps
     k[1::2, 2:4] = steps
-
-    def residual(g: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        g = g / (np.linalg.norm(g) or 1.0)
-        return np.linalg.norm(cols - np.outer(g, g @ cols), axis=0)
-
+    n = sel.size
+    moments = np.empty((f.shape[1], f.shape[1]))
+    r = np.empty(n)
     for _ in range(3):
-        wf = f * weight
-        g = np.linalg.eigh(wf @ wf.T)[1][:, -1]
-        r = residual(g, f)
-        keep = r <= 3.0 * np.median(r) + 1e-6
-        if keep.sum() < 32:
+        axes_moments(f, weight, n, moments)
+        g = np.ascontiguousarray(np.linalg.eigh(moments)[1][:, -1])
+        kept = axes_prune(g, f, weight, n, r, 3.0, 32)
+        if not kept:
             break
-        f, weight = f[:, keep], weight[keep]
+        n = kept
+
+    def mean_residual(line: np.ndarray) -> float:
+        axes_residuals(line, f, n, r)
+        return float(np.mean(r[:n]))
+
     a = np.linalg.lstsq(k, g, rcond=None)[0].reshape(2, 2)
     has_u, has_v = bool(np.any(steps[:, 0])), bool(np.any(steps[:, 1]))
     col = 1 if has_v else 0
@@ -443,12 +447,12 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int,
         a[:, 1] = (0.0, 1.0)
     if not np.all(np.isfinite(a)) or np.abs(a).max() > MAX_AXIS_ENTRY:
         return identity, False
-    better = residual(k @ a.ravel(), f).mean() < _AXES_MAX_GAIN * residual(k @ identity.ravel(), f).mean()
+    better = mean_residual(k @ a.ravel()) < _AXES_MAX_GAIN * mean_residual(k @ identity.ravel())
     # how far the axes move a warped pixel against the convention, at the outermost view
     moved = np.linalg.norm(steps @ a.T, axis=1)
     change = np.linalg.norm(steps @ (a - identity).T, axis=1) / np.maximum(moved, 1e-9)
-    magnitude = np.hypot(f[0::2], f[1::2])  # (J, N) flow lengths
-    shift = float(np.percentile((magnitude * change[:, None]).max(axis=0), 98))
+    axes_moved(f, n, np.ascontiguousarray(change, np.float64), r)
+    shift = float(np.percentile(r[:n], 98))
     return a.astype(np.float32), bool(better and shift >= _AXES_MIN_SHIFT)
 
 

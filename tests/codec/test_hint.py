@@ -437,6 +437,48 @@ def test_bad_view_axes_in_a_payload_are_bitstream_errors(bad):
         H.decode_hint(bytes(payload[:H._HEADER_V2.size + 7]), (16, 16), frame=3)
 
 
+def test_the_axes_fits_kernels_agree_with_numpy(rng):
+    from lfstream.codec._kernels import axes_moments, axes_moved, axes_prune, axes_residuals
+
+    n, m = 1500, 8
+    flows = rng.normal(size=(n, m))
+    weight = rng.random(n) + 0.1
+    # weighted second moments of the first k samples (float64: rounding only, 1e-12 relative)
+    moments = np.empty((m, m))
+    axes_moments(flows, weight, 1200, moments)
+    wf = flows[:1200] * weight[:1200, None]
+    np.testing.assert_allclose(moments, wf.T @ wf, rtol=1e-12, atol=1e-12)
+    # distance from the line along g, any length of g; a zero g is taken as the unit one
+    g = rng.normal(size=m)
+    r = np.empty(n)
+    axes_residuals(3.0 * g, flows, n, r)
+    unit = g / np.linalg.norm(g)
+    np.testing.assert_allclose(r, np.linalg.norm(flows - np.outer(flows @ unit, unit), axis=1), rtol=1e-12)
+    axes_residuals(np.zeros(m), flows, n, r)
+    np.testing.assert_allclose(r, np.linalg.norm(flows, axis=1), rtol=1e-12)
+    # pruning keeps the samples within 3x the median distance, in order, and their weights
+    far = flows.copy()
+    far[::50] *= 40.0  # outliers
+    expected = np.linalg.norm(far - np.outer(far @ unit, unit), axis=1)
+    keep = expected <= 3.0 * np.median(expected) + 1e-6
+    f2, w2 = far.copy(), weight.copy()
+    kept = axes_prune(g, f2, w2, n, r, 3.0, 32)
+    assert kept == keep.sum() and kept < n
+    np.testing.assert_array_equal(f2[:kept], far[keep])
+    np.testing.assert_array_equal(w2[:kept], weight[keep])
+    # too few would be kept: 0, and nothing moves
+    f3, w3 = far.copy(), weight.copy()
+    assert axes_prune(g, f3, w3, n, r, 3.0, n + 1) == 0
+    np.testing.assert_array_equal(f3, far)
+    np.testing.assert_array_equal(w3, weight)
+    # the longest flow of each sample, each view's length weighted
+    change = rng.random(m // 2)
+    out = np.empty(n)
+    axes_moved(flows, n, change, out)
+    lengths = np.hypot(flows[:, 0::2], flows[:, 1::2]) * change
+    np.testing.assert_allclose(out, lengths.max(axis=1), rtol=1e-12)
+
+
 def test_the_view_axes_option_is_validated():
     with pytest.raises(Exception, match="geometry"):
         H.HintOptions(geometry="sideways").validate()
