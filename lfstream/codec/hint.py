@@ -456,6 +456,23 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int,
     return a.astype(np.float32), bool(better and shift >= _AXES_MIN_SHIFT)
 
 
+def warm_axes_fit() -> None:
+    """Loads the kernels of the view axes' fit (:func:`_fit_axes`) with the argument types it
+    calls them with: a stream's warm-up frame is too small for the detection to reach its
+    fit, which would otherwise load them (or compile them, on a fresh install) in the first
+    timed frame."""
+    from lfstream.codec._kernels import axes_moments, axes_moved, axes_prune, axes_residuals
+
+    n, views = 32, 2
+    flows = np.zeros((n, 2 * views))
+    weight, r = np.ones(n), np.empty(n)
+    axes_moments(flows, weight, n, np.empty((2 * views, 2 * views)))
+    line = np.ones(2 * views)
+    axes_prune(line, flows, weight, n, r, 3.0, n)
+    axes_residuals(line, flows, n, r)
+    axes_moved(flows, n, np.ones(views), r)
+
+
 def _axes_views(keys: list[tuple[int, int]], u: int, v: int, present: np.ndarray | None) -> list[int]:
     """Which sweep views (:func:`sweep_views`) the axes detection uses: of the outer ring
     (the longest flows, and the fit it was tuned on), those on the centre's row and column

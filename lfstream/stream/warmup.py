@@ -160,6 +160,9 @@ def _warm(config: StreamConfig, decode: bool, child: subprocess.Popen | None) ->
     lf = warmup_lf()
     encoder = config.encoder()
     packet = encoder.encode_frame(lf, 0, 0)
+    from lfstream.codec.hint import warm_axes_fit
+
+    warm_axes_fit()  # the tiny frame's axes detection stops before its fit (rate control may hint too)
     if not decode:
         return
     if child is not None:
