@@ -1217,10 +1217,11 @@ def gain_samples(lf, ys, xs, d_samples, offsets, scale, out):  # pragma: no cove
                     out_row[dst + np.uint64(ch)] = np.float32(view[src + np.uint64(ch)]) * scale
 
 
-# The view axes' fit (lfstream.codec.hint._fit_axes) on a few thousand flow samples: as
-# numpy operations on small arrays it took a detection of lytro_bikes' axes from 1.67 to 1.30
-# ms on one thread (2-core Zen 5; the same axes to the bit on the shared captures, flipped
-# and transposed), on the lane whose end the hint waits for. Samples are rows
+# The view axes' fit (lfstream.codec.hint._fit_axes) on a few thousand flow samples. Its
+# numpy version made about sixty calls on small arrays; with these kernels a detection of
+# lytro_bikes' axes takes 1.30 instead of 1.67 ms on one thread (2-core Zen 5; the same axes
+# to the bit on the shared captures, flipped and transposed), on the lane whose end the hint
+# waits for. Samples are rows
 # of ``flows``: ``(dy_0, dx_0, dy_1, dx_1, ...)``, one pair per view. fastmath lets the
 # per-sample sums vectorise (2 ns an element without it); they round like numpy's to well
 # under the float32 the axes are returned in.
@@ -1250,7 +1251,7 @@ def axes_moments(flows, weight, n, out):  # pragma: no cover - compiled
 @numba.njit(**_FIT)
 def axes_residuals(g, flows, n, out):  # pragma: no cover - compiled
     """``out[c]``: the distance of sample ``c`` (of the first ``n``) from the line along
-    ``g`` (any length but zero; zero is taken as is)."""
+    ``g``, of any length (a zero ``g`` leaves each sample's own length)."""
     m = flows.shape[1]
     norm = np.sqrt(np.sum(g * g))
     unit = g / (norm if norm > 0.0 else 1.0)
