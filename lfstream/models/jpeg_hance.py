@@ -60,8 +60,9 @@ HANCE_PRESETS: dict[str, HanceConfig] = {
     # trained on real views after the decoder's post-filter (tools/train.py, recipe in the
     # manifest); no batch norm: its running statistics, taken on textured crops, pushed the
     # mostly black rendered seahorse view to SSIM 0.89 in a held-out test (0.99 without).
-    # Four blocks (each output sees 6 pixels around it; two blocks saw 4): 57 ms a 375 x 540
-    # view in bfloat16 on the 2-core Zen 5 against 34 (31-34 since lfstream's ELU kernels). Its correction at 0.617, the mean
+    # Four blocks (each output sees 6 pixels around it; two blocks saw 4): a 375 x 540 view in
+    # bfloat16 on the 2-core Zen 5 took 57 ms against the two blocks' 34, and 31-34 ms since
+    # lfstream's ELU kernels (lfstream.models._kernels). Its correction at 0.617, the mean
     # best share on the decoded LF of each training scene left out of a training of the
     # others (tools/hance_strength.py: lytro_bikes 0.637, dino 0.751, toys_array 0.464):
     # at full strength the held-out scenes' decoded LF gained -0.070 / +0.400 / +0.090 dB
