@@ -2,27 +2,42 @@
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-STAMP := $(VENV)/.installed
+PIP := $(BIN)/pip install -q -c constraints.txt
+RUNTIME := $(VENV)/.runtime
+DEV := $(VENV)/.dev
 
-.PHONY: demo test setup bench clean
+.PHONY: demo test docs setup bench clean
 
-$(STAMP): pyproject.toml
+$(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[dev,ray]'
-	touch $(STAMP)
 
-setup: $(STAMP)
+# the runtime dependencies only: what a user of `lfstream stream` needs
+$(RUNTIME): pyproject.toml constraints.txt | $(VENV)/bin/python
+	$(PIP) -e .
+	touch $(RUNTIME)
 
-demo: $(STAMP)
+# the test, docs and Ray extras on top
+$(DEV): $(RUNTIME)
+	$(PIP) -e '.[dev,docs,ray]'
+	touch $(DEV)
+
+setup: $(DEV)
+
+demo: $(RUNTIME)
 	$(BIN)/lfstream stream
 
-test: $(STAMP)
+test: $(DEV)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest tests
+	$(MAKE) docs
 
-bench: $(STAMP)
+docs: $(DEV)
+	$(BIN)/python bench/plots.py >/dev/null
+	$(BIN)/sphinx-build -W --keep-going -q -b html docs docs/_build/html
+
+bench: $(DEV)
 	$(BIN)/python bench/refocus.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info docs/_build

@@ -9,7 +9,10 @@ depth-of-field image's PSNR/SSIM, near/far refocused images' PSNR/SSIM (seed: al
 and 1.5), and encode/decode times measured here by the harness (median of --runs). All
 metrics on the 8-bit reconstructions.
 
-    python bench/codec.py [--json [FILE]] [--runs N] [--quick] [--scenes a,b] [--rounds R]
+    python bench/codec.py [--json [FILE]] [--runs N] [--quick] [--scenes a,b] [--rounds R] [--bpp T]
+
+``--bpp T`` (default 0.02; 0 skips it) adds lfstream's rate control (``encode(lf, bpp=T)``)
+and the same three anchors searched to the size it reached.
 
 ``--rounds R`` also times the speed ratios interleaved: R rounds, each timing lfstream's default
 and then x265 medium and ultrafast (their matched streams; encode and decode, the median of
@@ -52,7 +55,7 @@ def interleaved_speed(lf: np.ndarray, present: np.ndarray | None, baselines: lis
     """The speed ratios with every round timing lfstream's default and then each baseline's
     matched stream (encode and decode, the median of three calls each): the median of the
     per-round ratios and their range (``--rounds``), and the ratio of the best calls over all
-    rounds (``best``: the issue's best-of-N, each side's fastest call)."""
+    rounds (``best``: best-of-N, each side's fastest call)."""
     data = lfstream.encode(lf, quality=50, present=present)
     jobs = {"lfstream": (lambda: lfstream.encode(lf, quality=50, present=present), lambda: lfstream.decode(data))}
     for b in baselines:
@@ -88,6 +91,42 @@ def interleaved_speed(lf: np.ndarray, present: np.ndarray | None, baselines: lis
     return out
 
 
+def anchors_at(name: str, lf: np.ndarray, target: float, runs: int, suffix: str) -> list[dict]:
+    """x265 medium, x265 ultrafast and SVT-AV1 searched to ``target`` bpp, each timed here."""
+    rows = []
+    for codec, preset in (("hevc", "medium"), ("hevc", "ultrafast"), ("av1", None)):
+        res = encode_at_bpp(lf, codec, target, preset=preset)
+        rec = decode_views(res.data, codec, lf.shape[:2], lf.shape[2:4])
+        t_enc = timeit(lambda: encode_views(lf, codec, res.quality, constant_qp=res.constant_qp, preset=preset),
+                       runs=max(1, runs // 2))
+        t_dec = timeit(lambda: decode_views(res.data, codec, lf.shape[:2], lf.shape[2:4]), runs=runs)
+        label = {"medium": "x265 medium", "ultrafast": "x265 ultrafast"}.get(preset, "SVT-AV1 p8")
+        rows.append({"lf": name, "method": f"{label} @ {suffix}", "quality_param": res.quality,
+                     "bytes": res.bytes, "bpp": res.bpp, "encode_s": t_enc["median_s"], "decode_s": t_dec["median_s"],
+                     **quality(lf, rec), "_baseline": (codec, preset, res)})
+    return rows
+
+
+def rate_controlled(name: str, lf: np.ndarray, target: float, runs: int) -> list[dict]:
+    """lfstream's rate control at ``target`` bpp (one timed encode: it is a search), then the
+    anchors at the size it reached."""
+    data = lfstream.encode(lf, bpp=target)
+    t_enc = timeit(lambda: lfstream.encode(lf, bpp=target), runs=1, warmup=0)
+    rec = lfstream.decode(data)[0]
+    t_dec = timeit(lambda: lfstream.decode(data), runs=runs)
+    ours = {"lf": name, "method": f"lfstream --bpp {target:g}", "target_bpp": target, "bytes": len(data),
+            "bpp": bpp(len(data), lf.shape), "encode_s": t_enc["median_s"], "decode_s": t_dec["median_s"],
+            **quality(lf, rec)}
+    rows = [ours, *anchors_at(name, lf, ours["bpp"], runs, "--bpp bpp")]
+    ours["speed"] = {"encode_vs_x265_medium": rows[1]["encode_s"] / ours["encode_s"],
+                     "decode_vs_hevc": rows[1]["decode_s"] / ours["decode_s"]}
+    for r in rows:
+        print(f"{name:22s} {r['method']:30s} {r['bpp']:.4f} bpp  MPSNR {r['mpsnr']:6.2f}  MSSIM {r['mssim']:.4f}  "
+              f"enc {r['encode_s'] * 1e3:8.1f} ms  dec {r['decode_s'] * 1e3:7.1f} ms")
+        r.pop("_baseline", None)
+    return rows
+
+
 def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = None, rounds: int = 0) -> list[dict]:
     """The default (hint) and flat lfstream at q50, then x265 medium and ultrafast and SVT-AV1
     searched to the default's bpp; each timed here; speed ratios against x265 / HEVC."""
@@ -99,17 +138,7 @@ def evaluate(name: str, lf: np.ndarray, runs: int, present: np.ndarray | None = 
         t_dec = timeit(lambda: lfstream.decode(data), runs=runs)
         rows.append({"lf": name, "method": label, "bytes": len(data), "bpp": bpp(len(data), lf.shape),
                      "encode_s": t_enc["median_s"], "decode_s": t_dec["median_s"], **quality(lf, rec)})
-    target = rows[0]["bpp"]
-    for codec, preset in (("hevc", "medium"), ("hevc", "ultrafast"), ("av1", None)):
-        res = encode_at_bpp(lf, codec, target, preset=preset)
-        rec = decode_views(res.data, codec, lf.shape[:2], lf.shape[2:4])
-        t_enc = timeit(lambda: encode_views(lf, codec, res.quality, constant_qp=res.constant_qp, preset=preset),
-                       runs=max(1, runs // 2))
-        t_dec = timeit(lambda: decode_views(res.data, codec, lf.shape[:2], lf.shape[2:4]), runs=runs)
-        label = {"medium": "x265 medium", "ultrafast": "x265 ultrafast"}.get(preset, "SVT-AV1")
-        rows.append({"lf": name, "method": f"{label} @ default bpp", "quality_param": res.quality,
-                     "bytes": res.bytes, "bpp": res.bpp, "encode_s": t_enc["median_s"], "decode_s": t_dec["median_s"],
-                     **quality(lf, rec), "_baseline": (codec, preset, res)})
+    rows += anchors_at(name, lf, rows[0]["bpp"], runs, "default bpp")
     ours, x265, fast = rows[0], rows[2], rows[3]
     ours["speed"] = {"encode_vs_x265_medium": x265["encode_s"] / ours["encode_s"],
                      "encode_vs_x265_ultrafast": fast["encode_s"] / ours["encode_s"],
@@ -129,6 +158,7 @@ def main(argv=None) -> dict:
     p = parser(__doc__)
     p.add_argument("--scenes", help="comma-separated scene names (default: all)")
     p.add_argument("--rounds", type=int, default=0, help="also time the speed ratios interleaved, R rounds")
+    p.add_argument("--bpp", type=float, default=0.02, help="also lfstream's rate control at this target (0: skip)")
     args = p.parse_args(argv)
     runs = 1 if args.quick else args.runs
     # the synthetic clip and every shared sample (rd.py's scenes: HCI stars as their centre 3x3)
@@ -136,6 +166,8 @@ def main(argv=None) -> dict:
     results = []
     for name, lf in cases:
         results += evaluate(name, lf, runs, rounds=max(0, args.rounds))
+        if args.bpp > 0:
+            results += rate_controlled(name, lf, args.bpp, runs)
     return emit(args, results)
 
 

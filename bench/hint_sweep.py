@@ -1,5 +1,5 @@
-"""The encoder's plane sweep on a torch device against the CPU kernels: the hint's part of
-item 7 of the fast-hint issue (hint encode on a GPU).
+"""The encoder's plane sweep on a torch device against the CPU kernels (the hint's encode on
+a GPU).
 
 For the synthetic clip's first frame and every 7x7-or-larger shared sample, the key hint's
 map (:func:`lfstream.codec.hint.estimate_hint_map`: luma block means, axes, range pass,

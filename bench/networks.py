@@ -119,7 +119,7 @@ def decoded_quality(data: bytes, ref: np.ndarray, mask: np.ndarray | None, prese
 
 
 def hance_lf_rows(device: str, quick: bool) -> list[dict]:
-    """What the issue judges: the default encode of each real LF (its JPEG centre) decoded
+    """What counts: the default encode of each real LF (its JPEG centre) decoded
     with JPEG-Hance of each shipped preset (``hance="on"``) against without it (``"off"``:
     the post-filter), MPSNR and MSSIM over the views present, scenes the network trained on
     marked; for the fast preset also with the encoder's strength map."""
@@ -163,7 +163,7 @@ def bench_depth(device: str, runs: int, quick: bool) -> list[dict]:
     with the hint at 1/4 and at 1/8 resolution (about a third of the hint bytes; the default
     encode chooses between the two per stream, lfstream.codec.rate.HINT_COARSEN_MAX_LOSS_DB),
     decoded with ``depth="hint"`` and ``depth="net"`` (JPEG-Hance off in both); scenes it was
-    trained on are marked. The issue's two ways to win: net over hint at the same bits, or
+    trained on are marked. The two ways to win: net over hint at the same bits, or
     net on the 1/8 hint at the quality of the 1/4 hint."""
     import io
 
@@ -216,7 +216,7 @@ def bench_refnet(device: str, runs: int, quick: bool) -> list[dict]:
         with torch.inference_mode():
             out = (net(x)[0].permute(0, 2, 3, 1).mul(255).add(0.5).clamp(0, 255).byte().cpu().numpy())
         against_sas(name, focal_stack(lf), out)
-    # the real 7x7 captures (the issue's "within 35 dB of SaS on real LFs"), whole views
+    # the real 7x7 captures (the target: within 35 dB of SaS on real LFs), whole views
     for name, lf, mask in real_lfs(("lytro_bikes", "lytro_translucent")):
         if mask is None and lf.shape[:2] == tuple(net.config.views):
             against_sas(name, focal_stack(lf), focal_stack(lf, method="refnet", device=device))
@@ -232,7 +232,7 @@ def bench_refnet(device: str, runs: int, quick: bool) -> list[dict]:
 
     methods = [("refnet fast", refnet, device), ("sas", lambda: focal_stack(lf), "cpu"),
                ("fourier", lambda: focal_stack(lf, method="fourier"), "cpu")]
-    if device.startswith("cuda"):  # the issue compares RefNet with SaS on the same GPU
+    if device.startswith("cuda"):  # RefNet is compared with SaS on the same GPU
         lf_dev = torch.from_numpy(lf).to(device)
 
         def sas_on_device():

@@ -16,7 +16,7 @@ seconds (the median of --runs, default 5); the same harness and metric code for 
 method. Per scene: BD-rate on MPSNR and on MSSIM and BD-PSNR of every method against x265
 medium (piecewise cubic over the overlapping range, lfstream.metrics.bd_rate); every
 lfstream point's encode speed against x265 medium's median encode in the same run (the
-rate-distortion issue's speed target at every T) and its decode speed against x265
+rate control's speed target at every T) and its decode speed against x265
 medium's decode at the same bpp; one PNG with both curves.
 
     python bench/rd.py [--json [FILE]] [--quick] [--scenes NAME,...] [--png-dir DIR]
@@ -28,9 +28,9 @@ import os
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
-from _harness import ROOT, SHARED, SHARED_SCENES, emit, parser
+from _harness import ROOT, SHARED, SHARED_SCENES, emit, metadata, parser
+from plots import rd_figure
 
 import lfstream
 from lfstream.codec.baseline import decode_views, encode_views
@@ -137,7 +137,7 @@ def encode_speed(curves: dict[str, list[dict]]) -> dict[str, list[float]]:
 def decode_speed(curves: dict[str, list[dict]]) -> dict[str, list[float]]:
     """Per lfstream curve, x265 medium's decode time at each point's bpp (interpolated in
     log-bpp along its curve; its nearest end outside it) divided by the point's decode time
-    (the rate-distortion issue's decode target at every T: > 1 is faster)."""
+    (the decode target at every T: > 1 is faster)."""
     anchor = sorted(curves[ANCHOR], key=lambda p: p["bpp"])
     xs = np.log([p["bpp"] for p in anchor])
     ys = [p["decode_s"] for p in anchor]
@@ -164,46 +164,6 @@ def bjontegaard(curves: dict[str, list[dict]]) -> dict[str, dict]:
     return out
 
 
-def plot(scene: str, curves: dict[str, list[dict]], path: Path) -> None:
-    """MPSNR and MSSIM against log bpp, one line per method, drawn with OpenCV."""
-    w, h, m = 760, 520, 64
-    colours = [(200, 60, 20), (20, 140, 20), (20, 20, 200), (160, 20, 160), (0, 0, 0), (0, 140, 200), (120, 120, 0),
-               (30, 130, 255), (128, 128, 128), (0, 70, 140)]  # BGR, one per method
-    panels = []
-    pts = [p for c in curves.values() for p in c if 0.002 <= p["bpp"] <= 0.2]
-    x0, x1 = np.log10(min(p["bpp"] for p in pts)), np.log10(max(p["bpp"] for p in pts))
-    for metric, label in (("mpsnr", "MPSNR (dB)"), ("mssim", "MSSIM")):
-        img = np.full((h, w, 3), 255, np.uint8)
-        y0, y1 = min(p[metric] for p in pts), max(p[metric] for p in pts)
-        pad = (y1 - y0) * 0.05 + 1e-6
-        y0, y1 = y0 - pad, y1 + pad
-
-        def xy(p, y0=y0, y1=y1, metric=metric):
-            return (int(m + (np.log10(p["bpp"]) - x0) / max(x1 - x0, 1e-9) * (w - 2 * m)),
-                    int(h - m - (p[metric] - y0) / max(y1 - y0, 1e-9) * (h - 2 * m)))
-
-        cv2.rectangle(img, (m, m), (w - m, h - m), (0, 0, 0), 1)
-        for k in range(5):
-            cv2.putText(img, f"{10 ** (x0 + k * (x1 - x0) / 4):.3g}", (m + int(k * (w - 2 * m) / 4) - 18, h - m + 20),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1)
-            fmt = "{:.1f}" if metric == "mpsnr" else "{:.3f}"
-            cv2.putText(img, fmt.format(y0 + k * (y1 - y0) / 4), (4, h - m - int(k * (h - 2 * m) / 4)),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1)
-        cv2.putText(img, f"{scene}: {label} vs bits per pixel (log)", (m, 36), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 1)
-        for k, (method, curve) in enumerate(curves.items()):
-            c = colours[k % len(colours)]
-            sel = sorted((q for q in curve if 0.002 <= q["bpp"] <= 0.2), key=lambda q: q["bpp"])
-            p = [xy(q) for q in sel]
-            for a, b in zip(p, p[1:]):
-                cv2.line(img, a, b, c, 2, cv2.LINE_AA)
-            for q in p:
-                cv2.circle(img, q, 3, c, -1, cv2.LINE_AA)
-            cv2.putText(img, method, (w - m - 190, h - m - 12 - 20 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.5, c, 1, cv2.LINE_AA)
-        panels.append(img)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(path), np.concatenate(panels, axis=1))
-
-
 def main(argv=None) -> dict:
     p = parser(__doc__)
     p.add_argument("--scenes", help="comma-separated scene names (default: all found)")
@@ -214,6 +174,8 @@ def main(argv=None) -> dict:
     runs = 1 if args.quick else max(1, args.runs)
     only = set(args.scenes.split(",")) if args.scenes else None
     results = []
+    meta = metadata()
+    machine = f"{meta['device']['cpu']}, {meta['device']['cores']} cores, {meta['time'][:10]}"
     for name, lf in scenes(args.quick, only):
         curves = {} if args.skip_presets else {f"lfstream {preset or 'default'}": lfstream_curve(lf, preset, args.quick, runs)
                                                for preset in PRESETS}
@@ -226,7 +188,7 @@ def main(argv=None) -> dict:
         dspeed = decode_speed(curves)
         results.append({"scene": name, "shape": list(lf.shape), "curves": curves, "bjontegaard_vs_x265_medium": bd,
                         "encode_speed_vs_x265_medium": speed, "decode_speed_vs_x265_medium": dspeed})
-        plot(name, curves, args.png_dir / f"rd_{name}.png")
+        rd_figure(name, curves, machine, args.png_dir / f"rd_{name}.png")
         for method, row in bd.items():
             cells = [f"{k} {v:+7.1f}" if v is not None else f"{k}    n/a" for k, v in row.items() if k != "why"]
             print(f"{name:18s} {method:30s} " + "  ".join(cells), flush=True)

@@ -1,6 +1,6 @@
 """Focal-stack speed: exact shift-and-sum against naive baselines and Fourier slice.
 
-Target (issue 4): 16 planes of a 7x7x375x540 RGB light field in <= 0.25 s on the 2-core
+Target: 16 planes of a 7x7x375x540 RGB light field in <= 0.25 s on the 2-core
 CPU, reported as a ratio to a naive per-view grid_sample loop timed in the same run.
 
     python bench/refocus.py [--json [FILE]] [--runs N] [--quick]

@@ -1,5 +1,5 @@
-"""Synthetic light-field generation speed (target, issue 3: a 7x7x128x128 sample in
-<= 50 ms on the 2-core CPU, for on-the-fly training data), plus larger sizes.
+"""Synthetic light-field generation speed (target: a 7x7x128x128 sample in
+<= 50 ms on a 2-core CPU, for on-the-fly training data), plus larger sizes.
 
     python bench/synth.py [--json [FILE]] [--runs N] [--quick]
 """

@@ -9,7 +9,7 @@
 3. The main command: ``lfstream stream`` with no arguments (built-in clip, every output,
    metrics), run --runs times in this process; frames/s of the whole run (kernels warmed
    before the clock, as the command does), against the target of 5; then the same with
-   both networks (``--hance on --depth net``, the networks issue's row), same target.
+   both networks (``--hance on --depth net``), same target.
 4. Run time against error on the seahorse sample: every decoder configuration as a point
    (decode ms/frame, MPSNR), the Pareto front, and the default marked (PNG in bench/results).
 
@@ -126,7 +126,7 @@ def plot(points: list[dict], path) -> None:
     cv2.imwrite(str(path), img)
 
 
-#: frames/s the main command should reach on the 2-core development machine (issue: fast hint)
+#: frames/s the main command should reach on the 2-core development machine
 STREAM_TARGET_FPS = 5.0
 
 
@@ -178,7 +178,7 @@ def main(argv=None) -> dict:
     for b in ((1, 4) if not args.quick else (2,)):
         results.append(end_to_end(7, e2e_size, frames, b if b > 1 else 2, True, args.device))
     results.append(main_command(runs, frames=3 if args.quick else None))
-    # the networks issue's row: Depth-Net and JPEG-Hance in the stream, against the same target
+    # Depth-Net and JPEG-Hance in the stream, against the same target
     results.append(main_command(runs, frames=3 if args.quick else None, flags=("--hance", "on", "--depth", "net")))
     results += pareto(runs, args.device)
     return emit(args, results)

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"
 
 # the built-in clip's cache (lfstream.stream.sources.cache_dir) goes to a temporary folder,
-# never into the user's ~/.cache, and starts empty for every test session
+# never into the user's ~/.cache, and starts empty for every test run
 os.environ["LFSTREAM_CACHE"] = tempfile.mkdtemp(prefix="lfstream-test-cache-")
 
 #: Absolute tolerance per floating dtype for values in [0, 1].

@@ -1,6 +1,6 @@
 """Numerical stability: degenerate inputs, properties (hypothesis), reduced precision.
 
-Policy (documented in the README): NaN/Inf inside an input light field is *rejected* with
+Policy (documented in docs/conventions.md): NaN/Inf inside an input light field is *rejected* with
 an LFStreamError naming the input (never sanitised silently); nothing returns NaN or Inf
 except PSNR of identical images, which is +inf by definition (tables cap it at 100 dB).
 Reduced precision: float16/bfloat16 inference must stay within 0.1 dB of float32 or the

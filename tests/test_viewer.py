@@ -134,5 +134,5 @@ def test_click_focuses_the_plane_at_the_clicked_depth(browser, two_depths):
         assert chosen == expected, (d, chosen, expected, browser.execute_script("return window.lfview.lastClick"))
         assert abs(slopes[chosen] - d) <= plane_spacing((5, 5))
     shot = os.environ.get("LFSTREAM_SCREENSHOT")
-    if shot:  # the README's picture: LFSTREAM_SCREENSHOT=docs/viewer.png pytest tests/test_viewer.py
+    if shot:  # the guide's picture: LFSTREAM_SCREENSHOT=docs/figures/viewer.png pytest tests/test_viewer.py
         browser.save_screenshot(shot)

@@ -108,7 +108,7 @@ DEFAULT_STEPS = {"jpeg_hance": 3000, "depth_net": 3000, "refnet": 3000}
 DEPTH_TRAIN_SCENES = HANCE_TRAIN_SCENES = ("lytro_bikes", "dino", "toys_array")
 #: JPEG qualities the refiner trains at.
 DEPTH_QUALITIES = (30, 50, 70)
-#: The refiner's loss and augmentation (thirty-second session, 3,000 steps each on the CPU,
+#: The refiner's loss and augmentation (3,000 steps each on the CPU,
 #: held-out decoded LF against the hint at the 1/4 hint, seahorse / cotton / translucent):
 #: the MSE pooled over every scene (the recipe before) -0.156 / -0.137 / -0.085 dB, the
 #: high-error scene (toys_array, 19 dB) setting the corrections; its log -0.128 / -0.050 /
@@ -383,7 +383,7 @@ def hance_lf_loss(model, sample: DepthSample, recipe: Recipe, rng: np.random.Gen
     JPEG grid) restored, each warped to ``recipe.views`` random present views (the centre
     included) through the decoded hint's per-view maps, the gains multiplied in. The loss is
     the mean log MSE over (crop, view) pairs: minus the mean PSNR gain up to a constant, the
-    metric the issue judges (MPSNR averages per-view PSNR), and scale-free across scenes
+    metric that counts (MPSNR averages per-view PSNR), and scale-free across scenes
     whose prediction error differs by 20 dB. Samples that fall outside the restored context
     are left out. Logged: ``lf_gain_db``, the mean PSNR gain over the unrestored input."""
     c, m = recipe.crop, recipe.margin

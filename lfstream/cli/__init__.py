@@ -35,6 +35,8 @@ COMMANDS = {
     "models": "lfstream.cli.models",
     "demo": "lfstream.cli.demo",
     "view": "lfstream.cli.view",
+    "compare": "lfstream.cli.compare",
+    "golden": "lfstream.cli.golden",
 }
 
 

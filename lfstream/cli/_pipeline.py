@@ -27,8 +27,10 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
                         "apart), seed (the seed's 0.125 ... 2.0) or a list of alphas")
     p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
     p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1, help="frames per network batch in the decoder")
-    p.add_argument("--depth", choices=DEPTH_MODES, default="auto")
-    p.add_argument("--hance", choices=HANCE_MODES, default="auto")
+    p.add_argument("--depth", choices=DEPTH_MODES, default="auto",
+                   help="per-view disparity at the decoder: auto (what the stream carries), hint, flat or net (Depth-Net)")
+    p.add_argument("--hance", choices=HANCE_MODES, default="auto",
+                   help="JPEG-Hance on the centre view: auto (by the stream's strength maps and the device), on or off")
     p.add_argument("--networks", choices=NETWORK_PRESETS, default="fast",
                    help="the decoder's networks' shipped weights: fast, or paper (JPEG-Hance at the seed's size)")
     cam = p.add_argument_group("camera (optional: each focal plane then records its refocus distance)")
@@ -44,10 +46,11 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mssim-every", type=int_in((0, 1 << 30)), default=StreamConfig.mssim_every,
                    help="MSSIM on every N-th frame, from frame 0 (default: once a second of 30 fps video; 0: "
                         "never; MPSNR on all); the summary lists the frames in mssim_frames")
-    p.add_argument("--queue-size", type=int_in(QUEUE_RANGE), default=4)
+    p.add_argument("--queue-size", type=int_in(QUEUE_RANGE), default=4,
+                   help="frames each bounded queue between two stages holds (default 4)")
     p.add_argument("--no-viewer", action="store_true", help="do not write index.html (click-to-focus page)")
     p.add_argument("--progress", action="store_true", help="a status line on stderr (default when it is a terminal)")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print the run's summary as one JSON object")
 
 
 @contextlib.contextmanager

@@ -16,16 +16,16 @@ HELP = "code the views as a pseudo-sequence with HEVC (x265) or AV1 (SVT-AV1) fo
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path)
-    p.add_argument("--codec", choices=tuple(CODECS), default="hevc")
+    p.add_argument("input", type=Path, help="light field or LF video to code (any format lfstream reads)")
+    p.add_argument("--codec", choices=tuple(CODECS), default="hevc", help="hevc (x265) or av1 (SVT-AV1)")
     rate = p.add_mutually_exclusive_group()
     rate.add_argument("--qp", type=float_in(0, 63), help="HEVC: constant QP 0..51; AV1: CRF 1..63 (default 34)")
     rate.add_argument("--bpp", type=float_in(1e-6, 24), help="search the quality parameter for this bits per pixel")
-    p.add_argument("--order", choices=ORDERS, default="raster")
+    p.add_argument("--order", choices=ORDERS, default="raster", help="the order the views enter the pseudo-sequence")
     p.add_argument("-o", "--output", type=Path, help="write the decoded light field (.npy, folder or video)")
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     add_read_options(p)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("inputs", type=Path, nargs="+", help="LF videos / light fields (encode) or .lfs streams (decode)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (files in it are never overwritten "
                    "without --overwrite)")
-    p.add_argument("--mode", choices=MODES, default="encode")
+    p.add_argument("--mode", choices=MODES, default="encode", help="encode inputs to .lfs, or decode .lfs streams")
     p.add_argument("--engine", choices=ENGINES, default="local",
                    help="local: this process; ray: Ray tasks (pip install 'lfstream[ray]')")
     p.add_argument("--address", help="a running Ray cluster (default: a local one for this command)")
@@ -43,9 +43,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", help="decode: where the networks run")
     p.add_argument("--format", default=".npy", help="decode: output extension (.npy, .npz, .avi, .mp4, .mkv or '' / folder "
                    "for folders of views)")
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     add_read_options(p)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print the report as one JSON object")
 
 
 def _text(r: dict) -> str:

@@ -18,9 +18,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lossy", action="store_true", help="a video as yuv420p x264 (VP9 in .webm): plays everywhere, "
                    "not exact")
     p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate of a video (default: the input's, else 30)")
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     add_read_options(p)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:

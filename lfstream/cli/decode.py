@@ -14,7 +14,7 @@ HELP = "decode an .lfs stream to a light field (.npy, folder or video)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path)
+    p.add_argument("input", type=Path, help="the .lfs stream to decode")
     p.add_argument("-o", "--output", type=Path, required=True, help=".npy (T,U,V,H,W,3), .npz, a video or a folder")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto",
                    help="disparity source: the stream's hint, flat (zero), or Depth-Net (default: hint if present)")
@@ -40,8 +40,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--disparity-out", type=Path, help="folder for the centre-view disparity of each frame (PFM)")
     add_first_frame(p)
     p.add_argument("--max-frames", type=int_in((1, 1 << 30)), help="decode at most this many frames")
-    p.add_argument("--overwrite", action="store_true")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -16,7 +16,7 @@ DEFAULT_OUTPUT = Path("lfstream-demo")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", type=Path, help=f"output folder (default ./{DEFAULT_OUTPUT}[-N], never overwritten)")
     p.add_argument("--size", type=parse_size, default=(375, 540), help="view size HxW of the built-in light field")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -17,7 +17,7 @@ HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre v
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path)
+    p.add_argument("input", type=Path, help="light field or LF video to encode (any format lfstream reads)")
     p.add_argument("-o", "--output", type=Path, required=True, help="the .lfs file (never overwritten without --overwrite)")
     rate = p.add_mutually_exclusive_group()
     rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="quality of the centre view (default 50)")
@@ -50,9 +50,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate to record (default: the input's, else 30)")
     p.add_argument("--device", default="cpu", help="where the hint's plane sweep runs: cpu (the default) or cuda "
                    "(rate control, --bpp, sweeps on the cpu)")
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     add_read_options(p)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -14,7 +14,7 @@ HELP = "plenoptic camera -> equivalent camera array, refocus distance and depth 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--focal-length", type=float_in(1e-3, 1e6), required=True, metavar="MM", help="main-lens focal length")
-    p.add_argument("--f-number", type=float_in(0.1, 1000), required=True)
+    p.add_argument("--f-number", type=float_in(0.1, 1000), required=True, help="main-lens f-number")
     p.add_argument("--microlenses", type=int_in((1, 1 << 20)), required=True, metavar="M", help="microlenses per axis")
     p.add_argument("--pixels-per-lens", type=int_in((1, MAX_VIEWS_PER_AXIS)), required=True, metavar="N",
                    help="pixels per axis under a microlens")

@@ -29,17 +29,18 @@ def parse_alphas(text: str) -> list[float]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path)
+    p.add_argument("input", type=Path, help="light field or LF video to refocus (any format lfstream reads)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; must be empty)")
     p.add_argument("--alphas", type=parse_alphas, metavar="seed|A,B,...",
                    help="refocus parameters alpha (default: seed, the seed's 0.125,0.25,...,2.0)")
     p.add_argument("--slopes", type=parse_float_list, help="instead of alphas: shifts in pixels per view step")
     p.add_argument("--slope-range", nargs=3, type=float, metavar=("LO", "HI", "N"),
                    help="N slopes evenly spaced from LO to HI (a focus range in disparity units)")
-    p.add_argument("--method", choices=METHODS, default="sas")
+    p.add_argument("--method", choices=METHODS, default="sas", help="sas (shift-and-sum), fourier (Fourier slice) or refnet")
     p.add_argument("--device", default="cpu", help="where RefNet runs (method refnet)")
     p.add_argument("--aperture", type=float_in(1e-6, 1e6), help="synthetic aperture radius in view steps (default: all views)")
-    p.add_argument("--aperture-shape", choices=("circle", "square", "gaussian"), default="circle")
+    p.add_argument("--aperture-shape", choices=("circle", "square", "gaussian"), default="circle",
+                   help="shape of the synthetic aperture's view weights")
     p.add_argument("--fps", type=float_in(1e-3, 1000), default=8.0, help="frame rate of the focal sweep")
     p.add_argument("--no-sweep", action="store_true", help="skip the MP4/GIF focal sweep")
     p.add_argument("--no-viewer", action="store_true", help="do not write index.html (click-to-focus page)")
@@ -47,7 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="auto: detect a grid whose views run the other way or are stored (V, U), and refocus "
                         "its views in the convention's order; standard: the order as stored")
     add_read_options(p)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:

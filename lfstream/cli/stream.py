@@ -20,7 +20,8 @@ HELP = "stream an LF video (default: the built-in synthetic clip) through the wh
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path, nargs="?", help="LF video / light field (default: built-in synthetic clip)")
-    p.add_argument("--transport", choices=TRANSPORTS, default="inproc")
+    p.add_argument("--transport", choices=TRANSPORTS, default="inproc",
+                   help="how packets travel from encoder to decoder: in process, through a file, or over loopback TCP")
     p.add_argument("--to", help="HOST:PORT of an `lfstream serve`: send there instead of decoding here")
     rate = p.add_mutually_exclusive_group()
     rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="JPEG quality of the centre view")

@@ -15,20 +15,21 @@ HELP = "render a synthetic LF clip with ground-truth disparity"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("output", type=Path, help=".npz (LF and disparity together) or any write_lf target")
-    p.add_argument("--frames", type=int_in((1, 100000)), default=8)
-    p.add_argument("--views", type=int_in((1, MAX_VIEWS_PER_AXIS)), default=7)
+    p.add_argument("--frames", type=int_in((1, 100000)), default=8, help="frames of video")
+    p.add_argument("--views", type=int_in((1, MAX_VIEWS_PER_AXIS)), default=7, help="views per axis of the grid")
     p.add_argument("--size", type=parse_size, default=(128, 128), help="HxW of each view")
-    p.add_argument("--seed", type=int_in((0, 2**63 - 1)), default=0)
-    p.add_argument("--layers", type=int_in((0, 64)), default=4)
-    p.add_argument("--disparity-range", nargs=2, type=float, metavar=("FAR", "NEAR"), default=(-1.0, 1.5))
+    p.add_argument("--seed", type=int_in((0, 2**63 - 1)), default=0, help="random seed: the same seed gives the same bytes")
+    p.add_argument("--layers", type=int_in((0, 64)), default=4, help="textured depth layers in front of the background")
+    p.add_argument("--disparity-range", nargs=2, type=float, metavar=("FAR", "NEAR"), default=(-1.0, 1.5),
+                   help="disparity of the farthest and nearest layer, pixels per view step")
     p.add_argument("--motion", type=float_in(0, 1000), default=1.5, help="object speed, pixels per frame")
     p.add_argument("--camera-pan", type=float_in(-1000, 1000), default=0.5, help="camera pan, pixels per frame")
     p.add_argument("--noise", type=float_in(0, 255), default=0.0, help="sensor noise, 8-bit levels at mid-grey")
     p.add_argument("--vignetting", type=float_in(0, 1), default=0.0, help="0..1")
-    p.add_argument("--exposure-drift", type=float_in(-1, 1), default=0.0)
-    p.add_argument("--fps", type=float_in(1e-3, 10000), default=30.0)
-    p.add_argument("--overwrite", action="store_true")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--exposure-drift", type=float_in(-1, 1), default=0.0, help="relative exposure change across the view grid")
+    p.add_argument("--fps", type=float_in(1e-3, 10000), default=30.0, help="frame rate recorded in video outputs")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:

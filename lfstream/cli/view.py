@@ -13,7 +13,7 @@ HELP = "write index.html, a self-contained click-to-focus page, for a folder of 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("folder", type=Path, help="an output folder of lfstream stream or lfstream refocus")
     p.add_argument("--fps", type=float, help="playback rate of a video (default: the stream's, else 8)")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -27,8 +27,8 @@ _ROW = dict(fastmath=True, cache=True, nogil=True)
 # Row helpers that allocate nothing run without numba's reference counting (``_nrt=False``):
 # with it, every array argument of a call that LLVM does not inline is counted up on entry
 # and down on each exit with atomic instructions, a dozen or more a row through the warp's
-# helpers, which were 16 % of a decode's CPU (perf on the 2-core Zen 5: NRT_incref and
-# NRT_decref the two hottest instructions); their callers hold the arrays meanwhile.
+# helpers, a sixth of a decode's CPU under perf (NRT_incref and NRT_decref the two hottest
+# instructions); their callers hold the arrays meanwhile.
 # ``_nrt`` is an option numba's CPU target knows but does not document: where a numba
 # without it would refuse the kernels, they count as before.
 _BORROW = {"_nrt": False} if hasattr(CPUTargetOptions, "_nrt") else {}
@@ -1218,10 +1218,8 @@ def gain_samples(lf, ys, xs, d_samples, offsets, scale, out):  # pragma: no cove
 
 
 # The view axes' fit (lfstream.codec.hint._fit_axes) on a few thousand flow samples. Its
-# numpy version made about sixty calls on small arrays; with these kernels a detection of
-# lytro_bikes' axes takes 1.30 instead of 1.67 ms on one thread (2-core Zen 5; the same axes
-# to the bit on the shared captures, flipped and transposed), on the lane whose end the hint
-# waits for. Samples are rows
+# numpy version made about sixty calls on small arrays, on the lane whose end the hint waits
+# for; these kernels give the same axes to the bit (tests/codec/test_hint.py). Samples are rows
 # of ``flows``: ``(dy_0, dx_0, dy_1, dx_1, ...)``, one pair per view. fastmath lets the
 # per-sample sums vectorise (2 ns an element without it); they round like numpy's to well
 # under the float32 the axes are returned in.

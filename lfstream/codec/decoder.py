@@ -50,10 +50,8 @@ HANCE_MODES = ("auto", "on", "off")
 # dB at q10..q60, -0.00..+0.70 at q70, -1.39..+0.17 at q90; the decoded LF at q30/50/70
 # seahorse +0.53/+0.30/-0.04 dB, cotton +0.68/+0.65/+0.60, lytro_translucent +0.32/+0.22/+0.10.
 HANCE_MAX_QUALITY = {"fast": 80, "paper": 60}
-#: Presets "auto" runs on a CUDA device only: on the 2-core Zen 5 CPU the fast network costs
-#: 31-34 ms a 375 x 540 view in bfloat16 (lfstream.models.device, where the CPU has it; 49-55
-#: ms in float32), twice the rest of a 7x7 decode (~15 ms, half HEVC's: issue #15's decode
-#: target), and the paper one 0.25 s;
+#: Presets "auto" runs on a CUDA device only: on a CPU even the fast network costs about twice
+#: the rest of a 7x7 decode, which would lose the decoder's lead over HEVC;
 #: ``hance="on"`` runs it anywhere, and "auto" too on a stream with the encoder's strength maps
 #: (:data:`lfstream.codec.hance.HANCE_MAP_PRESET`), whose encoder measured where it helps.
 HANCE_AUTO_GPU_ONLY = ("fast", "paper")
@@ -67,10 +65,8 @@ BATCH_RANGE = (1, 256)
 #: noise; 0.026 and 0.056 (0.04 and 0.08 bpp) 0.93 and 0.84x, lytro_bikes at 0.12 0.84x.
 BESIDE_MIN_BITS = 0.015
 #: Threads that decode a batch's centre views (JPEG decode and post-filter, or AV1) side by
-#: side: the cores. On an H100 machine (16 cores) a 30-frame batch spent 141 of its 242 ms
-#: there one frame after another (the warp on the GPU 52 ms); side by side the whole decode
-#: ran 1.83x faster (1.75x with JPEG-Hance). On the 2-core dev box: AV1 centres 1.48x, JPEG
-#: ones unchanged (OpenCV's filter already uses both cores). Batches of one are decoded inline.
+#: side: the cores. With the warp on a GPU the centre views one after another were most of a
+#: batch's time; OpenCV's filter already uses every core for a JPEG. Batches of one are decoded inline.
 CENTRE_WORKERS = max(1, os.cpu_count() or 1)
 
 

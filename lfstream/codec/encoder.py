@@ -49,10 +49,9 @@ RESIDUAL_SPEED = {"fast": 12, "balanced": 12, "best": 8}
 #: ``half-views``): there the AV1 sequence *is* the stream, so ``best`` takes SVT-AV1's
 #: slowest preset lfstream allows. Measured on toys_array (9x9x240x320, views with the
 #: centre as key frame, qualities 20-65): preset 4 codes 16-24 % fewer bytes than preset 8 at
-#: -0.25…+0.37 dB, for 1.1 s a sequence instead of 0.5 s (2-core EPYC). ``balanced`` takes
+#: -0.25…+0.37 dB, for about twice the time. ``balanced`` takes
 #: preset 8 (the default's choice where warping cannot predict, :func:`lfstream.codec.rate.choose_default`):
-#: toys_array at q50 0.280 bpp / 32.87 dB / MSSIM 0.9473 in 0.52 s, against preset 10's 0.381 bpp /
-#: 32.45 dB / 0.9374 in 0.22 s, which falls below x265 medium at its size.
+#: preset 10 is faster but falls below x265 medium at its size on toys_array.
 VIEWS_SPEED = {"fast": 12, "balanced": 8, "best": 4}
 
 

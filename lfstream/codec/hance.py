@@ -19,8 +19,7 @@ two-block network before it +0.211 / +0.317 / +0.112 (its full correction -0.072
 +0.075 dB; 8 x 8 tiles +0.198 / +0.311 / +0.102). MSSIM higher on each. Costs the
 encoder the hint and gains of every frame (its reference decoder follows the stream), and a
 decode, the network and two warps on the frames it measures (the first and every hint key
-frame): about 70 ms more for a 7x7x375x540 frame on two Zen 5 cores (135 ms with a warp per
-level). An option (``Encoder(hance_map=True)``, ``lfstream encode --hance-map``,
+frame), several times the default encode. An option (``Encoder(hance_map=True)``, ``lfstream encode --hance-map``,
 ``lfstream stream --hance-map``), not the default. A stream with maps names the network in
 its header, and a decoder's ``hance="auto"`` runs it there on any device.
 """
@@ -62,9 +61,8 @@ def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarra
     ``R`` the warps of ``centre`` and ``restored``, up to the rounding of each to 8 bits. The
     error is then a quadratic in ``s`` per tile, measured from two warps in one pass
     (:func:`lfstream.codec._kernels.strength_error_terms`) rather than a blend, a warp and an
-    error pass per level: 93 -> 26 ms a 7x7x375x540 frame on two Zen 5 cores, the same
-    decoded light fields within 0.001 dB on the six shared scenes (the rounding moves a level
-    only where two are within it).
+    error pass per level: a fraction of the work, the same decoded light fields within
+    0.001 dB (the rounding moves a level only where two are within it).
 
     Args:
         views: the original frame, uint8.

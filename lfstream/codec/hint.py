@@ -101,10 +101,8 @@ class HintOptions:
             the working resolution (smaller: finer, slower); the parabolic fit refines it.
         min_spacing: the candidates' spacing is at least this many pixels of the full view
             per view step (0: ``step`` alone). On a 7x7 grid ``step`` alone spaces them 1/6
-            px apart; a quarter pixel (a third fewer candidates) measured, at q50, one frame,
-            two Zen 5 cores: the encode 0.93 / 0.91 / 0.98 the time (synthetic clip,
-            lytro_bikes, lytro_translucent; bench/ab.py), decoded MPSNR within 0.02 dB of the
-            finer sweep on the real captures (synthetic clip +0.04 dB), MSSIM within
+            px apart; a quarter pixel (a third fewer candidates) encodes faster, decoded
+            MPSNR within 0.02 dB of the finer sweep on the real captures (synthetic clip +0.04 dB), MSSIM within
             0.0001, and on the ground truth of 14 synthetic 7x7x375x540 scenes MSEx100
             28.63 -> 28.19, BadPix(0.07) 0.406 -> 0.356. It does not bind on 5x5 or 3x3 grids
             (1/4 and 1/2 px already), where wider spacing lost: seahorse (5x5) -0.09 dB at
@@ -299,11 +297,8 @@ def _kept_array(name: str, shape: tuple[int, ...]) -> np.ndarray:
     :data:`KEPT_ARRAY_MAX_BYTES`. Made afresh each frame, these were the encode's largest
     temporaries (lytro_bikes: a 5.7 MB cost volume, 2.6 MB of luma twice), and glibc, whose
     trim threshold is twice the largest chunk a process has freed, returned them to the
-    kernel after each frame in a process that had freed nothing larger: 2,200-2,600 page
-    faults an encode, none kept (a loop of ``lfstream.encode`` on the 2-core Zen 5 EPYC:
-    lytro_bikes 13.8 -> 12.5 ms, 23.4 -> 19.6 ms of CPU; lytro_translucent 19.7 -> 13.3;
-    dino 20.0 -> 13.4; a video of dino's 64 MB frames, which glibc maps afresh, 8.6 -> 6.3-7.1
-    ms a frame). Library code does not set the process's allocator; it keeps its own buffers."""
+    kernel after each frame in a process that had freed nothing larger: thousands of page
+    faults an encode, none kept. Library code does not set the process's allocator; it keeps its own buffers."""
     size = int(np.prod(shape))
     if size * 4 > KEPT_ARRAY_MAX_BYTES:
         return np.empty(shape, np.float32)

@@ -1,11 +1,11 @@
 """The centre view's still-image coding: JPEG (the seed's choice, the ``fast`` preset) or an
 AV1 intra frame (SVT-AV1 encoder, dav1d decoder, both inside PyAV).
 
-Measured on the shared samples' centre views (2-core EPYC, ``bench/rd.py`` has the light-field
-curves): at equal PSNR an AV1 key frame takes 35-40 % fewer bytes than JPEG on the noisy Lytro
-capture and about 4x fewer on the clean rendered seahorse, for 20-55 ms of encoding instead of
-under 1 ms. Everything else in a packet (the depth hint, the gains) is unchanged, so the AV1
-centre moves the codec's whole rate-distortion curve to fewer bits.
+On the shared samples' centre views (``bench/rd.py`` has the light-field curves) an AV1 key
+frame takes a third fewer bytes than JPEG at equal PSNR on the noisy Lytro capture and about
+4x fewer on the clean rendered seahorse, for tens of times the encoding time. Everything else
+in a packet (the depth hint, the gains) is unchanged, so the AV1 centre moves the codec's
+whole rate-distortion curve to fewer bits.
 
 Both coders take one ``quality`` in 1..100 (higher: better, more bits); for AV1 it maps
 linearly onto SVT-AV1's CRF 63..1. Both are deterministic: the same image and quality give

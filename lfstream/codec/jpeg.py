@@ -158,7 +158,7 @@ def deblock_jpeg(img: np.ndarray, scale: float, post_filter: PostFilter = POST_F
     every one (q50: +0.33 to +0.91 dB, mean +0.54; SSIM +0.002 to +0.02; q95: +0.02 to +0.2
     dB), and it beats the JPEG-Hance fast network trained on synthetic renders on each scene
     it was measured against (q10 / 30 / 50: +0.50..+0.83 / +0.45..+1.11 / +0.38..+0.91 dB
-    against -0.08..+0.43 / -0.34..+0.25); 2.5 ms a 375 x 540 view on two Zen 3 threads (5 on one), 0.6 ms on two Zen 5 ones.
+    against -0.08..+0.43 / -0.34..+0.25).
     Its strength was chosen among 0.15, 0.2 and 0.25 on those views.
 
     Shape:
@@ -176,7 +176,7 @@ def deblock_jpeg(img: np.ndarray, scale: float, post_filter: PostFilter = POST_F
 
 #: OpenCV's own bilateral filter splits an image into ``pixels / 2**16`` stripes of rows
 #: (rounded) for its threads: a 375 x 540 view is 3 stripes, which two threads finish in the
-#: time of two (1.85 ms against 2.76 on one thread, not 1.4).
+#: time of two, not one and a half.
 _CV_STRIPE_PIXELS = 1 << 16
 
 
@@ -184,8 +184,8 @@ def _bilateral_in_pieces(img: np.ndarray, diameter: int, sigma_color: float, sig
     """``cv2.bilateralFilter`` of ``img`` (OpenCV's own code), called once per piece of rows
     of about ``threads * 2**16`` pixels, so each call is as many stripes as OpenCV has
     threads; each piece with ``diameter // 2`` context rows of its neighbours (a piece at the
-    image's edge keeps that edge's border): the same bytes as one call. 375 x 540, 7 x 7, two
-    Zen 5 threads: 1.45 ms against 1.85 as one call.
+    image's edge keeps that edge's border): the same bytes as one call, with no thread idle
+    on a last odd stripe.
 
     Shape:
         - img: ``(H, W, 3)`` uint8, C-contiguous; output the same
@@ -375,7 +375,7 @@ def choose_post_filter(original: np.ndarray, data: bytes, bands: int = CHOICE_BA
     PSNR against the default filter; then, where the sample has black (0, 0, 0) pixels the
     JPEG decodes above 0, the black floor they decode at, kept by the same rule. The
     default where nothing measured is better by :data:`CHOICE_MIN_SSIM_GAIN` or the view
-    is too small to measure. 2.8 ms a 375 x 540 view on two Zen 5 cores (7-11 ms on Zen 3 ones).
+    is too small to measure.
 
     Shape:
         - original: ``(H, W, 3)`` uint8

@@ -294,9 +294,8 @@ def choose_default(frame: np.ndarray, quality: int = 50, present: np.ndarray | N
             # the hint at half the resolution, judged on the same luma: sent where it predicts
             # the ring as well, for the bytes it saves (coarsening_allowance), its payload coded
             # once here. On this thread after the full hint's check, not beside it on workers:
-            # each check's parallel kernels then had the two cores to themselves (beside, with
-            # the coarser hint's gains, 2.9 against 2.0 ms on lytro_bikes, 2-core Zen 5), and
-            # the coarser hint's gains are measured only where it is sent
+            # each check's parallel kernels then have the cores to themselves, and the
+            # coarser hint's gains are measured only where it is sent
             db_coarse = prediction_psnr(frame8, coarse, enc.last_gains, present, enc.last_ring_luma,
                                         grid_scale=enc.last_hint.scale)
             coarse_payload = key_payload(coarse)

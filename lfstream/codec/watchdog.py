@@ -32,8 +32,8 @@ T = TypeVar("T")
 
 #: Seconds every encode is allowed before the per-pixel allowance.
 BASE_DEADLINE_S = 60.0
-#: Seconds allowed per coded pixel (measured: SVT-AV1 preset 8 codes a 7x7x375x540 residual
-#: sequence, 9.9 Mpixel, in 0.4-1.2 s on the 2-core EPYC; x265 medium in 0.2-1.0 s).
+#: Seconds allowed per coded pixel: several times what SVT-AV1 preset 8 and x265 medium need
+#: on a 2-core CPU, so only a hung encoder reaches it.
 DEADLINE_S_PER_PIXEL = 2e-6
 #: Attempts before giving up (the first plus one retry on a fresh encoder).
 ATTEMPTS = 2
@@ -93,9 +93,8 @@ def beside(fn: Callable[[], T]) -> Future:
     work that only its end needs (the encoder's centre view and post-filter choice, the view
     axes detection). On a machine of at most :data:`LANE_MAX_CORES` cores they queue on one
     lane thread, one after another, instead of taking two more threads beside the caller's
-    parallel kernels (measured on the 2-core EPYC, the default single-frame encode of
-    lytro_bikes, three processes each: 11.2-11.7 ms, 19.9 ms of CPU, against 11.8-13.6 ms,
-    20.5-22.0 ms of CPU on the two worker threads; the same bytes). Elsewhere
+    parallel kernels (on two cores, two extra threads cost more wall and CPU time than the
+    one lane, for the same bytes). Elsewhere
     :func:`in_background`. Called on the lane itself, ``fn`` runs before this returns.
 
     The jobs keep numba's thread count: a lane job on one thread (:func:`single_numba_thread`)

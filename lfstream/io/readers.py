@@ -521,8 +521,7 @@ def _range_count(count: int | None, opts: ReadOptions, path: Path) -> int | None
 #: Decoder threads of each view's video in a folder of view videos: one decoder a view, all
 #: open at once (49 for 7x7), so FFmpeg's own choice (one a core, plus one) would start
 #: thousands of threads on a large machine; two let a view's decode overlap the next's.
-#: Measured on 12 frames of 7x7 lossless x264 views of 375x540 (2-core EPYC): one thread
-#: 3.64 s, two 2.32 s, FFmpeg's choice 2.35 s, the same 3.7 s of CPU.
+#: Two were as fast as FFmpeg's choice on two cores, for the same CPU time.
 VIEW_DECODER_THREADS = 2
 
 

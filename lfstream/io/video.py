@@ -29,23 +29,16 @@ SIZE_METADATA_PREFIX = "lfstream-size="
 #: x264's settings for a lossless ``.mp4``/``.mov`` (RGB, QP 0). ``fastdecode`` codes with
 #: CAVLC instead of CABAC: a lossless mosaic is mostly residual bits, and CABAC's serial
 #: arithmetic decoding of them made reading the file the slowest stage of streaming it.
-#: Measured on the 2-core EPYC, mosaics of 7x7x375x540 (2625 x 3780, synthetic clips),
-#: against the previous ``veryfast`` with CABAC: reading 438 -> 149 ms of CPU a frame
-#: (245 -> 78 ms wall on two threads), writing 323 -> 137 ms, 7.49 -> 7.69 MB a frame
-#: (+2.7 %) without sensor noise; with it (bench/video_io.py) 728 -> 267 ms, 355 -> 194 ms,
-#: +15.5 % (CAVLC codes noise less tightly; slower presets won back 1-3 % of it at 2-3x the
-#: writing time). ``faster`` rather than ``veryfast``: 8 % fewer bytes on the noise-free clip.
-#: Files written before stay valid H.264 (they read at the old speed).
+#: Against ``veryfast`` with CABAC it reads and writes about three times faster for a few
+#: per cent more bytes (more with sensor noise, which CAVLC codes less tightly;
+#: ``bench/video_io.py``). ``faster`` rather than ``veryfast``: fewer bytes on noise-free clips.
 LOSSLESS_X264 = {"qp": "0", "preset": "faster", "tune": "fastdecode"}
 #: The lossless codec by extension: x264 RGB in ``.mp4``/``.mov`` (the smallest files: it
 #: predicts a frame from the one before), FFV1 in ``.mkv`` (the archival standard), Ut Video
 #: in ``.avi``/``.nut`` (each frame on its own, planes predicted from the left neighbour and
-#: Huffman-coded: the quickest to read). Measured on the 2-core Zen 5 EPYC, 7x7x375x540
-#: mosaics (bench/video_io.py), reading a frame (wall / CPU) and its size: the built-in
-#: clip's noisy frames x264 152-185 / 267-315 ms, 12.8 MB; FFV1 252 / 490 ms, 11.2 MB; Ut
-#: Video 41-57 / 46-63 ms, 13.2 MB; lytro_bikes' views x264 177 / 197 ms, 6.0 MB, Ut Video
-#: 34 / 58 ms, 15.8 MB (without noise x264's predictions pay; frames that repeat cost it
-#: almost nothing). So ``.avi`` is the format to stream from disk, ``.mp4`` to keep.
+#: Huffman-coded: the quickest to read; ``bench/video_io.py`` compares them). Without noise
+#: x264's predictions pay and repeated frames cost it almost nothing, so ``.avi`` is the
+#: format to stream from disk, ``.mp4`` to keep.
 LOSSLESS_CODECS = {".mkv": ("ffv1", "bgr0"), ".avi": ("utvideo", "gbrp"), ".nut": ("utvideo", "gbrp")}
 
 
@@ -304,9 +297,8 @@ class VideoWriter:
             codec, pix_fmt, options = "gif", "rgb8", {}
         elif ext == ".webm":
             # WebM holds VP8, VP9 and AV1 only (x264 was refused there, with a traceback): VP9,
-            # lossless in RGB, or yuv420p at the CRF; libvpx's realtime speed. Measured on a
-            # 7x7x375x540 mosaic (2-core Zen 5 EPYC): lossless 0.75 s a frame to write and 0.66
-            # to read, 11.9 MB (the quick lossless formats are .avi and .mp4)
+            # lossless in RGB, or yuv420p at the CRF; libvpx's realtime speed, still far slower
+            # than the quick lossless formats (.avi and .mp4)
             codec, options = "libvpx-vp9", {"deadline": "realtime", "cpu-used": "8", "row-mt": "1"}
             if self._lossless:
                 pix_fmt, options = "gbrp", {**options, "lossless": "1"}

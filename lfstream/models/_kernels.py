@@ -1,11 +1,10 @@
 """Fused CPU kernels of the networks' inference, compiled by numba (cached on disk).
 
-ELU: PyTorch's CPU ``elu_`` costs 0.5 ns an element on the 2-core Zen 5 (its ``expm1`` does
-not vectorise; a ``relu_`` costs a twentieth of that), and JPEG-Hance fast spent 26 of its 50
-ms a 375 x 540 view in its 13 ELUs (the torch profiler, bfloat16). These kernels compute
-``expm1`` of the negative side as a polynomial on ``x / 32`` doubled back five times
-(``e(2r) = e(r) (e(r) + 2)``), which vectorises: 0.41 against 1.39 ms for 24 x 200 x 540
-elements at two threads, in either dtype.
+ELU: PyTorch's CPU ``elu_`` does not vectorise its ``expm1`` (a ``relu_`` costs a twentieth
+of it), and JPEG-Hance fast spent half its time in its 13 ELUs under the torch profiler.
+These kernels compute ``expm1`` of the negative side as a polynomial on ``x / 32`` doubled
+back five times (``e(2r) = e(r) (e(r) + 2)``), which vectorises, in either dtype
+(``bench/networks.py`` times both).
 
 Accuracy (alpha 1): float32 within 4e-7 of the true value relative (PyTorch's own is within
 about 1e-7); bfloat16 rounds the float32 result to nearest even, as PyTorch does from its

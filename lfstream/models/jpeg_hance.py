@@ -60,8 +60,7 @@ HANCE_PRESETS: dict[str, HanceConfig] = {
     # trained on real views after the decoder's post-filter (tools/train.py, recipe in the
     # manifest); no batch norm: its running statistics, taken on textured crops, pushed the
     # mostly black rendered seahorse view to SSIM 0.89 in a held-out test (0.99 without).
-    # Four blocks (each output sees 6 pixels around it; two blocks saw 4): a 375 x 540 view in
-    # bfloat16 on the 2-core Zen 5 took 57 ms against the two blocks' 34, and 31-34 ms since
+    # Four blocks (each output sees 6 pixels around it; two blocks saw 4), affordable with
     # lfstream's ELU kernels (lfstream.models._kernels). Its correction at 0.617, the mean
     # best share on the decoded LF of each training scene left out of a training of the
     # others (tools/hance_strength.py: lytro_bikes 0.637, dino 0.751, toys_array 0.464):
@@ -130,7 +129,7 @@ def jpeg_hance(image: torch.Tensor, model: JPEGHance) -> torch.Tensor:
 #: each, four or five alive at once) were fresh pages from the kernel at every layer, faulted
 #: in and zeroed, where glibc trims its heap above twice its (dynamic) mmap threshold; in a
 #: process that has freed light-field-sized arrays (a decoder's) the strips' smaller ones are
-#: reused: 46 -> 28 ms (the same bytes; 2-core Zen 5). In a fresh process, the same time.
+#: reused (the same bytes, much less time). In a fresh process, the same time.
 HANCE_STRIP_BYTES = 10 << 20
 
 

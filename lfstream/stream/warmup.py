@@ -72,16 +72,15 @@ def _compiled_marker() -> Path | None:
     return folder / f"kernels-{key.hexdigest()[:16]}.compiled"
 
 
-#: Seconds the warm-up waits for :func:`compile_beside`'s child (its compile takes about 15 s
-#: on the 2-core EPYC) before it stops it and compiles the rest itself.
+#: Seconds the warm-up waits for :func:`compile_beside`'s child (many times its usual compile
+#: time) before it stops it and compiles the rest itself.
 CHILD_COMPILE_TIMEOUT_S = 300
 
 
 def compile_beside(warp: bool, focal: bool) -> subprocess.Popen | None:
     """Starts a child process that compiles the decoder's warp and the focal stack
-    (:func:`compile_warp_and_focal_stack`: the two slowest kernels to compile, about 10 and
-    3.5 s on the 2-core EPYC) while this process compiles the encoder's and the metrics'
-    (about 10 s): numba caches what either compiles on disk, and each then loads the
+    (:func:`compile_warp_and_focal_stack`: the two slowest kernels to compile) while this
+    process compiles the encoder's and the metrics': numba caches what either compiles on disk, and each then loads the
     other's. Only where the kernels look uncompiled (no :func:`_compiled_marker`): a warm
     start would pay the child's imports for nothing. ``None`` where it is not started (or
     cannot be: the warm-up then compiles everything itself, as before)."""
@@ -131,8 +130,8 @@ def warm_kernels(config: StreamConfig, decode: bool = True) -> None:
     the tiny frame, to have a packet to decode."""
     if any(kind in config.save for kind in ("mp4", "mp4-lossless", "sweep", "lf")):
         import av  # noqa: F401 - the sink's video library: ~0.1 s to import, paid here once
-    # where the kernels were not compiled yet (a first run: about 25 s on the 2-core EPYC,
-    # one core), the warp and the focal stack compile in a child process meanwhile
+    # where the kernels were not compiled yet (a first run), the warp and the focal stack
+    # compile in a child process meanwhile
     child = compile_beside(warp=decode and config.device == "cpu",
                            focal=decode and config.refocus in ("auto", "sas"))
     try:

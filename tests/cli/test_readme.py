@@ -1,5 +1,6 @@
-"""Every command line the README shows as an example runs as printed: each is parsed by
-the real parser (running them all would take minutes), and the inputs it names exist."""
+"""Every command line the README and the docs pages show as an example runs as printed:
+each is parsed by the real parser (running them all would take minutes), and the inputs it
+names exist."""
 
 import re
 import shlex
@@ -10,12 +11,13 @@ import pytest
 from lfstream.cli import build_parser
 from tests.conftest import ROOT
 
-README = (ROOT / "README.md").read_text()
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 
 def _examples() -> list[str]:
     lines = []
-    for block in re.findall(r"```sh\n(.*?)```", README, flags=re.S):
+    text = "\n".join(page.read_text() for page in PAGES)
+    for block in re.findall(r"```sh\n(.*?)```", text, flags=re.S):
         for line in block.splitlines():
             line = line.split("  #")[0].strip()
             if line.startswith("lfstream "):
@@ -38,7 +40,7 @@ def test_readme_example_parses(line, capsys):
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # pragma: no cover - the failure message says which line
-        pytest.fail(f"README example does not parse: {line}\n{capsys.readouterr().err}")
+        pytest.fail(f"documented example does not parse: {line}\n{capsys.readouterr().err}")
         raise exc
     for value in vars(args).values():
         if isinstance(value, Path) and str(value).startswith("../shared"):

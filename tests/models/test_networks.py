@@ -303,7 +303,7 @@ def test_shipped_hance_beats_the_post_filter_on_held_out_scenes(folder):
 @pytest.mark.parametrize("folder, floor", [(("seahorse5x5", "camImagesFlat"), 0.17), (("hci_star", "cotton"), 0.25),
                                            (("lytro_translucent",), 0.1)])
 def test_shipped_hance_gains_on_the_decoded_light_field_of_every_held_out_scene(folder, floor):
-    """Issue #17's target for JPEG-Hance fast: on the decoded light field of the default
+    """The target for JPEG-Hance fast: on the decoded light field of the default
     encode (its JPEG centre view, quality 50) of each scene it was not trained on, at least
     +0.1 dB MPSNR and MSSIM not lower, at the precision the decoder picks on this machine."""
     import lfstream

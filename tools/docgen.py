@@ -1,0 +1,245 @@
+"""Generated documentation: tables from bench JSON and the model manifest, the CLI reference
+from the argparse parsers, and the README's generated blocks.
+
+The README and the docs site show measured numbers only through this module, so a table
+cannot drift from the JSON it was made from; ``tests/test_docs.py`` checks the README's
+blocks against it.
+
+    python tools/docgen.py            # rewrite the README's generated blocks
+    python tools/docgen.py --check    # exit 1 if they are stale (what the test checks)
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import re
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "docs" / "results"
+README = ROOT / "README.md"
+MANIFEST = ROOT / "lfstream" / "models" / "weights" / "manifest.json"
+#: The anchors the results table sets beside lfstream, in column order.
+ANCHORS = ("x265 medium", "x265 ultrafast", "SVT-AV1 p8")
+_BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
+
+
+def load(name: str) -> dict:
+    """One bench JSON document from ``docs/results`` (``{"metadata": ..., "results": [...]}``)."""
+    return json.loads((RESULTS / f"{name}.json").read_text())
+
+
+def machine(doc: dict) -> str:
+    """The CPU, its cores and the date of a bench document, for a table's caption."""
+    meta = doc["metadata"]
+    dev = meta["device"]
+    gpu = f", {dev['cuda']}" if dev.get("cuda") else ""
+    return f"{dev['cpu']}, {dev['cores']} cores{gpu}; {meta['time'][:10]}"
+
+
+def _cell(row: dict | None) -> str:
+    if row is None:
+        return "—"
+    return (f"{row['mpsnr']:.2f} / {row['mssim']:.4f} · {row['encode_s'] * 1e3:.0f} / "
+            f"{row['decode_s'] * 1e3:.0f} ms")
+
+
+def _points(doc: dict) -> list[tuple[str, str, dict, dict[str, dict]]]:
+    """(scene, point label, lfstream's row, anchors by name) for every operating point."""
+    out = []
+    rows = doc["results"]
+    for i, r in enumerate(rows):
+        method = r["method"]
+        if method.startswith("lfstream q50 (default"):
+            label, suffix = "default (q50)", "@ default bpp"
+        elif method.startswith("lfstream --bpp"):
+            label, suffix = method.removeprefix("lfstream "), "@ --bpp bpp"
+        else:
+            continue
+        anchors = {}
+        for other in rows[i + 1:]:
+            if other["lf"] != r["lf"] or other["method"].startswith("lfstream --bpp"):
+                break
+            for name in ANCHORS:
+                if other["method"] == f"{name} {suffix}":
+                    anchors[name] = other
+        out.append((r["lf"], label, r, anchors))
+    return out
+
+
+def results_table(doc: dict) -> str:
+    """The README's results table: every scene at the default's and at ``--bpp``'s size, each
+    cell MPSNR (dB) / MSSIM · encode / decode ms."""
+    head = ["scene", "point", "bpp", "lfstream", *ANCHORS]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for scene, label, ours, anchors in _points(doc):
+        point = f"`{label}`" if label.startswith("--") else label
+        cells = [scene, point, f"{ours['bpp']:.4f}", f"**{_cell(ours)}**", *(_cell(anchors.get(a)) for a in ANCHORS)]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines.append("")
+    lines.append(f"Each cell: MPSNR dB / MSSIM · encode / decode ms; anchors coded as one pseudo-sequence "
+                 f"searched to lfstream's size. `bench/codec.py` on {machine(doc)}.")
+    return "\n".join(lines) + "\n"
+
+
+def speed_table(doc: dict) -> str:
+    """Per operating point: the speed ratios against x265 medium (encode) and HEVC (decode)
+    and the MPSNR / MSSIM margins over each anchor."""
+    head = ["scene", "point", "encode vs x265 medium", "decode vs HEVC", *(f"Δ vs {a} (dB / MSSIM)" for a in ANCHORS)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for scene, label, ours, anchors in _points(doc):
+        med = anchors.get("x265 medium")
+        enc = f"{med['encode_s'] / ours['encode_s']:.2f}×" if med else "—"
+        dec = f"{med['decode_s'] / ours['decode_s']:.2f}×" if med else "—"
+        deltas = []
+        for a in ANCHORS:
+            other = anchors.get(a)
+            deltas.append("—" if other is None else
+                          f"{ours['mpsnr'] - other['mpsnr']:+.2f} / {ours['mssim'] - other['mssim']:+.4f}")
+        point = f"`{label}`" if label.startswith("--") else label
+        lines.append("| " + " | ".join([scene, point, enc, dec, *deltas]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def generic_table(doc: dict, columns: Sequence[str] | None = None, limit: int = 60) -> str:
+    """Any bench document's results as a table of their scalar fields."""
+    rows = doc["results"]
+    if columns is None:
+        columns = []
+        for r in rows:
+            for k, v in r.items():
+                if k not in columns and isinstance(v, (int, float, str, bool)) and not k.startswith("_"):
+                    columns.append(k)
+        columns = columns[:9]
+
+    def fmt(v) -> str:
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return "—" if v is None else str(v)
+
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows[:limit]:
+        lines.append("| " + " | ".join(fmt(r.get(c)) for c in columns) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def zoo_table(manifest: dict | None = None) -> str:
+    """The model zoo from the weights manifest: name, preset, parameters, SHA-256 and the
+    reference metrics it records."""
+    manifest = manifest if manifest is not None else json.loads(MANIFEST.read_text())
+    lines = ["| network | preset | parameters | SHA-256 | reference |", "|---|---|---|---|---|"]
+    for m in manifest["models"]:
+        ref = m.get("reference_metrics", {})
+        bits = []
+        gains = ref.get("default_encode_lf_mpsnr_gain_db")
+        if gains:
+            bits.append("held-out LF gain " + ", ".join(f"{k} {v:+.2f} dB" for k, v in gains.items()))
+        dec = ref.get("decoded_mpsnr_db")
+        if dec:
+            held = {k: v for k, v in dec.items() if "train" not in k}
+            bits.append("held-out hint→net " + ", ".join(
+                f"{k} {v['net_1/4'] - v['hint_1/4']:+.3f} dB" for k, v in held.items() if "net_1/4" in v))
+        sas = ref.get("synthetic_psnr_vs_sas_db_heldout6")
+        if sas:
+            bits.append(f"vs shift-and-sum {min(sas):.1f}–{max(sas):.1f} dB PSNR (held-out synthetic)")
+        ms = [f"{k.split('_')[-1]} {v:.0f} ms" for k, v in ref.items() if k.startswith("cpu_ms_375x540_")]
+        if ms:
+            bits.append("CPU a 375×540 view: " + ", ".join(ms))
+        lines.append(f"| {m['name']} | {m['preset']} | {m['params']:,} | `{m['sha256'][:16]}…` | {'; '.join(bits) or '—'} |")
+    return "\n".join(lines) + "\n"
+
+
+def subcommands(parser: argparse.ArgumentParser, prefix: str = "") -> list[tuple[str, argparse.ArgumentParser]]:
+    """``(name, parser)`` of every subcommand, nested ones (``golden record``) included."""
+    out = []
+    for act in parser._actions:
+        if isinstance(act, argparse._SubParsersAction):
+            for name, p in act.choices.items():
+                out.append((f"{prefix}{name}", p))
+                out += subcommands(p, f"{prefix}{name} ")
+    return out
+
+
+def cli_reference() -> str:
+    """Markdown for every subcommand, taken from the parsers themselves."""
+    sys.path.insert(0, str(ROOT))
+    from lfstream.cli import build_parser
+
+    parser = build_parser()
+    out = ["```text", parser.format_help().rstrip(), "```", ""]
+    for name, p in subcommands(parser):
+        out += [f"{'###' if ' ' in name else '##'} `lfstream {name}`", "", p.description or "", ""]
+        out += ["| option | help | default |", "|---|---|---|"]
+        for act in p._actions:
+            if isinstance(act, argparse._HelpAction):
+                continue
+            flags = ", ".join(f"`{s}`" for s in act.option_strings) or f"`{act.metavar or act.dest}`"
+            if act.choices and not isinstance(act.choices, dict):
+                flags += " {" + ",".join(str(c) for c in act.choices) + "}"
+            default = "" if act.default in (None, argparse.SUPPRESS, False) or act.option_strings == [] else f"`{act.default}`"
+            text = p._get_formatter()._expand_help(act) if act.help else ""
+            text = text.replace("|", "\\|").replace("\n", " ")
+            out.append(f"| {flags} | {text} | {default} |")
+        out += ["", "```text", p.format_usage().strip(), "```", ""]
+    return "\n".join(out)
+
+
+def bench_sections() -> str:
+    """Every bench document in ``docs/results`` other than the codec's: its script, machine
+    and results."""
+    out = []
+    for path in sorted(RESULTS.glob("*.json")):
+        if path.stem == "codec":
+            continue
+        doc = json.loads(path.read_text())
+        out += [f"### `bench/{path.stem}.py`", "", f"Measured on {machine(doc)}.", "", generic_table(doc)]
+    return "\n".join(out) + "\n"
+
+
+def readme_blocks() -> dict[str, str]:
+    """The README's generated blocks by name."""
+    return {"results": results_table(load("codec")), "zoo": zoo_table()}
+
+
+@functools.lru_cache(maxsize=1)
+def docs_blocks() -> dict[str, str]:
+    """The docs pages' generated blocks by name (made once a build)."""
+    codec = load("codec")
+    return {"results": results_table(codec), "speed": speed_table(codec), "zoo": zoo_table(),
+            "cli": cli_reference(), "bench": bench_sections(), "machine": f"Measured on {machine(codec)}.\n"}
+
+
+def render(text: str, made: dict[str, str]) -> str:
+    """``text`` with every ``<!-- generated:NAME -->`` block replaced by ``made[NAME]``."""
+
+    def sub(m: re.Match) -> str:
+        name = m.group("name")
+        if name not in made:
+            raise KeyError(f"unknown generated block {name!r}")
+        return m.group(1) + made[name] + m.group(4)
+
+    return _BLOCK.sub(sub, text)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--check", action="store_true", help="exit 1 if the README's generated blocks are stale")
+    args = p.parse_args(argv)
+    text = README.read_text()
+    new = render(text, readme_blocks())
+    if args.check:
+        if new != text:
+            print("README.md: generated blocks are stale; run python tools/docgen.py", file=sys.stderr)
+            return 1
+        return 0
+    if new != text:
+        README.write_text(new)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
