@@ -20,6 +20,18 @@ METHOD_STYLE = {"lfstream": ("tab:red", "o"), "x265 medium": ("tab:blue", "s"), 
                 "SVT-AV1 p8": ("tab:green", "^")}
 
 
+def _save(fig, path: Path) -> Path:
+    """Writes a figure as PNG without a timestamp or version in it (the same JSON gives the
+    same file)."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, metadata={"Software": None})
+    plt.close(fig)
+    return path
+
+
 def _machine(doc: dict) -> str:
     meta = doc["metadata"]
     return f"{meta['device']['cpu']}, {meta['device']['cores']} cores, {meta['time'][:10]}"
@@ -84,11 +96,7 @@ def codec_figure(doc: dict, out: Path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
     ax.set_title(f"bench/codec.py — {_machine(doc)}", fontsize=9)
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110, metadata={"Software": None})
-    plt.close(fig)
-    return out
+    return _save(fig, out)
 
 
 def rd_figure(scene: str, curves: dict[str, list[dict]], machine: str, path: Path) -> Path:
@@ -111,11 +119,7 @@ def rd_figure(scene: str, curves: dict[str, list[dict]], machine: str, path: Pat
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=7)
     fig.suptitle(f"{scene} — {machine}", fontsize=9)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, metadata={"Software": None})
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def rd_figures(doc: dict, out_dir: Path) -> list[Path]:

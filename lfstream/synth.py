@@ -44,6 +44,9 @@ class SynthConfig:
             shot noise plus read noise.
         vignetting: strength in [0, 1] of a corner-view and radial falloff like a Lytro capture.
         seed: random seed.
+        travel_frames: the number of frames the scene is laid out for (its canvas, the
+            exposure cycle); ``None``: ``frames``. A clip of ``frames <= travel_frames`` is then
+            the first frames of any longer one with the same settings.
     """
 
     frames: int = 1
@@ -57,12 +60,15 @@ class SynthConfig:
     exposure_drift: float = 0.0
     noise: float = 0.0
     vignetting: float = 0.0
+    travel_frames: int | None = None
     seed: int = 0
 
     def validate(self) -> None:
         h, w = self.size
         if not 1 <= self.frames <= 100000:
             raise LFValueError(f"frames: must be in 1..100000, got {self.frames}")
+        if self.travel_frames is not None and not 1 <= self.travel_frames <= 100000:
+            raise LFValueError(f"travel_frames: must be in 1..100000, got {self.travel_frames}")
         if not 1 <= self.views <= MAX_VIEWS_PER_AXIS:
             raise LFValueError(f"views: must be in 1..{MAX_VIEWS_PER_AXIS}, got {self.views}")
         if not (8 <= h <= MAX_VIEW_SIDE and 8 <= w <= MAX_VIEW_SIDE):
@@ -238,10 +244,11 @@ def _frames(config: SynthConfig) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     config.validate()
     rng = np.random.default_rng(config.seed)
     t_n, n = config.frames, config.views
+    t_layout = max(t_n, config.travel_frames or t_n)  # what the canvas and the exposure cycle span
     h, w = config.size
     far, near = config.disparity_range
     u0 = n // 2
-    max_travel = (config.motion + abs(config.camera_pan) * (1 + max(abs(far), abs(near)))) * (t_n - 1)
+    max_travel = (config.motion + abs(config.camera_pan) * (1 + max(abs(far), abs(near)))) * (t_layout - 1)
     margin = int(np.ceil(max(abs(far), abs(near)) * u0 + max_travel + 4))
     hb, wb = h + 2 * margin, w + 2 * margin
     cy, cx = (h - 1) / 2.0, (w - 1) / 2.0
@@ -295,7 +302,7 @@ def _frames(config: SynthConfig) -> Iterator[tuple[np.ndarray, np.ndarray]]:
                     roi = img[ry0:ry1, rx0:rx1]
                     roi += a[..., None] * (warped[..., :3] - roi)  # "over" compositing
                     np.copyto(dmap[ry0:ry1, rx0:rx1], np.float32(dc), where=a > 0.5)
-        gain = 1.0 + config.exposure_drift * np.sin(2 * np.pi * t / max(t_n, 2))
+        gain = 1.0 + config.exposure_drift * np.sin(2 * np.pi * t / max(t_layout, 2))
         if gain != 1.0:
             views *= gain
         if vig is not None:

@@ -10,11 +10,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
-from lfstream.cli._common import int_in
+from lfstream.cli._common import EXIT_INTERRUPTED, EXIT_TERMINATED, int_in, sigterm_as_ctrl_c
 from lfstream.errors import LFStreamError
 
 #: The subcommands, in the order ``--help`` lists them: name -> module. Each module has
@@ -40,11 +41,36 @@ COMMANDS = {
 }
 
 
+#: A value that starts with a minus sign: a negative number or a list of numbers (``-1,0,1``),
+#: taken as a value after a space as it is after ``=`` (argparse alone knows single numbers).
+_NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d)[\d.,eE+\-]*$")
+
+
+#: Library messages name Python arguments beside the CLI flags (``overwrite=True /
+#: --overwrite``); the CLI prints only its own words.
+_PYTHON_AND_FLAG = re.compile(r"\b[a-z_]+=(?:True|False) / (--[a-z-]+)")
+_PYTHON_ONLY = {"depth='hint'": "--depth hint", "encode with depth_hint=True": "encode without --no-depth-hint"}
+
+
+def cli_words(message: str) -> str:
+    """``message`` with its Python argument names replaced by the CLI's flags."""
+    message = _PYTHON_AND_FLAG.sub(r"\1", message)
+    for python, flag in _PYTHON_ONLY.items():
+        message = message.replace(python, flag)
+    return message
+
+
 class _Parser(argparse.ArgumentParser):
-    """Usage errors as one line (the message and a pointer to ``--help``), exit status 2."""
+    """Usage errors as one line (the message and a pointer to ``--help``), exit status 2;
+    negative numbers and number lists accepted after a space."""
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def _parse_optional(self, arg_string: str):
+        if _NEGATIVE_VALUE.match(arg_string):
+            return None
+        return super()._parse_optional(arg_string)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -66,7 +92,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Runs the CLI; returns the exit status (0 success, 2 error, 130 interrupted)."""
+    """Runs the CLI; returns the exit status (0 success, 1 a comparison failed, 2 error, 130
+    interrupted by Ctrl-C, 143 by SIGTERM)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "_run", None):
@@ -78,16 +105,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
     # SVT-AV1 prints its configuration banner at info level; the CLI keeps stderr for errors
     os.environ.setdefault("SVT_LOG", "1")
-    try:
-        return int(args._run(args) or 0)
-    except LFStreamError as exc:
-        print(f"lfstream {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"lfstream {args.command}: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:
-        return 0
+    with sigterm_as_ctrl_c() as terminated:
+        try:
+            code = int(args._run(args) or 0)
+        except LFStreamError as exc:
+            print(f"lfstream {args.command}: error: {cli_words(str(exc))}", file=sys.stderr)
+            code = 2
+        except KeyboardInterrupt:
+            print(f"lfstream {args.command}: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+            code = EXIT_INTERRUPTED
+        except BrokenPipeError:
+            code = 0
+        except OSError as exc:  # the file system refused a path the library did not name (a name too long, say)
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"lfstream {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+            code = 2
+    return EXIT_TERMINATED if terminated and code == EXIT_INTERRUPTED else code
 
 
 def entry() -> None:
@@ -95,4 +128,4 @@ def entry() -> None:
     sys.exit(main())
 
 
-__all__ = ["COMMANDS", "build_parser", "main", "entry"]
+__all__ = ["COMMANDS", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "build_parser", "main", "entry", "sigterm_as_ctrl_c"]

@@ -19,6 +19,25 @@ import numpy as np
 from lfstream.io.readers import ReadOptions
 
 
+def path_arg(text: str) -> Path:
+    """A path argument; an empty one is refused (``Path("")`` would be the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path")
+    return Path(text)
+
+
+def one_output(args: argparse.Namespace) -> Path:
+    """The output of a command that takes it as ``-o`` or, in its older form, positionally."""
+    from lfstream.errors import LFValueError
+
+    given = [p for p in (getattr(args, "output", None), getattr(args, "output_pos", None)) if p is not None]
+    if not given:
+        raise LFValueError("-o/--output: name the output")
+    if len(given) == 2 and given[0] != given[1]:
+        raise LFValueError(f"two outputs given ({given[1]} and -o {given[0]}); give one")
+    return given[0]
+
+
 def parse_grid(text: str, what: str = "grid", example: str = "7x7") -> tuple[int, int]:
     """Parses ``UxV`` (or ``N``) into a view grid (``what``/``example``: the message's words)."""
     try:
@@ -173,23 +192,111 @@ def read_input(args: argparse.Namespace, whole: bool = False, count_frames: bool
     return InputFrames(lf[0], lf, len(lf), lf, loaded.present, loaded.fps, disparity)
 
 
+class _SigtermRelay:
+    """The SIGTERM handler of :func:`sigterm_as_ctrl_c`; ``came`` records that it fired."""
+
+    def __init__(self) -> None:
+        self.came: list[int] = []
+
+    def __call__(self, signum, frame) -> None:
+        self.came.append(signum)
+        handler = signal.getsignal(signal.SIGINT)
+        if callable(handler):
+            handler(signal.SIGINT, frame)
+        else:  # SIGINT ignored (a background job) or left to the system: stop as Ctrl-C would
+            raise KeyboardInterrupt
+
+
+@contextmanager
+def sigterm_as_ctrl_c() -> Iterator[list[int]]:
+    """SIGTERM handled exactly as Ctrl-C: it calls whatever SIGINT handler is in force (the
+    default raises KeyboardInterrupt; a block that must finish a frame first defers it), so
+    every command finalises its outputs and removes its temporary files the same way. Yields
+    a list that holds SIGTERM once it came. Main thread only (elsewhere a no-op)."""
+    relay = _SigtermRelay()
+    if threading.current_thread() is not threading.main_thread():
+        yield relay.came
+        return
+    previous = signal.signal(signal.SIGTERM, relay)
+    try:
+        yield relay.came
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _deferrable_signals() -> list[int]:
+    """The stop signals a block may hold back: Ctrl-C where Python's own handler raises it,
+    SIGTERM where the CLI relays it as Ctrl-C (:func:`sigterm_as_ctrl_c`)."""
+    if threading.current_thread() is not threading.main_thread():
+        return []
+    out = []
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        out.append(signal.SIGINT)
+    if isinstance(signal.getsignal(signal.SIGTERM), _SigtermRelay):
+        out.append(signal.SIGTERM)
+    return out
+
+
 @contextmanager
 def interrupt_after() -> Iterator[None]:
-    """Ctrl-C inside the block takes effect when it ends, so what the block writes (one
-    frame's outputs) is written whole. Only where Ctrl-C raises KeyboardInterrupt (Python's
-    own handler, in the main thread); anywhere else the block runs as it is."""
-    if threading.current_thread() is not threading.main_thread() \
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+    """Ctrl-C (or SIGTERM) inside the block takes effect when it ends, so what the block
+    writes (one frame's outputs, a file being finalised) is written whole."""
+    signals = _deferrable_signals()
+    if not signals:
         yield
         return
     caught: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    previous = {sig: signal.signal(sig, lambda signum, frame: caught.append(signum)) for sig in signals}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     if caught:
+        previous[caught[0]](caught[0], None)  # Python's handler, or the relay: raises KeyboardInterrupt
         raise KeyboardInterrupt
+
+
+#: Exit statuses of a run stopped by Ctrl-C (SIGINT) and by SIGTERM: 128 + the signal.
+EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
+
+
+class FrameBoundaryStop:
+    """Ctrl-C (and SIGTERM, which the CLI relays as Ctrl-C) inside the block stops
+    :meth:`frames` at the next frame boundary, so the frames already done are kept whole
+    (an encode's stream of them is finalised); a second Ctrl-C stops at once. Only where
+    Ctrl-C raises KeyboardInterrupt (Python's own handler, in the main thread)."""
+
+    def __init__(self) -> None:
+        self.stopped = False
+        self.signal: int | None = None
+        self._previous: dict | None = None
+
+    def __enter__(self) -> FrameBoundaryStop:
+        self._previous = {sig: signal.signal(sig, self._handle) for sig in _deferrable_signals()}
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.stopped:  # asked twice: now
+            raise KeyboardInterrupt
+        self.stopped = True
+        self.signal = signum
+
+    def __exit__(self, *exc) -> None:
+        for sig, handler in (self._previous or {}).items():
+            signal.signal(sig, handler)
+        relay = (self._previous or {}).get(signal.SIGTERM)
+        if self.stopped and self.signal == signal.SIGTERM and isinstance(relay, _SigtermRelay):
+            relay.came.append(signal.SIGTERM)  # for the exit status: stopped by SIGTERM
+
+    def frames(self, frames: Iterable[np.ndarray]) -> Iterator[np.ndarray]:
+        """``frames`` until a stop was asked for."""
+        for frame in frames:
+            if self.stopped:
+                return
+            yield frame
+            if self.stopped:
+                return
 
 
 def coding_layers(depth_hint: bool, residual: int | None, residual_mode: str | None,

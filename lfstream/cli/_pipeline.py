@@ -8,7 +8,7 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-from lfstream.cli._common import coding_layers, emit, float_in, int_in, parse_float_list
+from lfstream.cli._common import coding_layers, emit, float_in, int_in, parse_float_list, path_arg
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
 from lfstream.stream.config import BATCH_RANGE, FOCUS_MODES, QUEUE_RANGE, REFOCUS_MODES, SAVE_KINDS, StreamConfig
 
@@ -19,7 +19,9 @@ def parse_focus(text: str) -> str | tuple[float, ...]:
 
 
 def add_pipeline_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("-o", "--output", type=Path, help="output folder (default: a new ./lfstream-out[-N])")
+    p.add_argument("-o", "--output", type=path_arg, help="output folder (default: a new ./lfstream-out[-N])")
+    p.add_argument("--overwrite", action="store_true",
+                   help="write into an -o folder that already holds files (its files of the same names are replaced)")
     p.add_argument("--refocus", choices=REFOCUS_MODES, default="auto",
                    help="focal-stack renderer (auto: picked per device by measured speed and error)")
     p.add_argument("--alphas", type=parse_focus, default="auto", metavar="auto|seed|A,B,...",

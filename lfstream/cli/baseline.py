@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 
-from lfstream.cli._common import add_read_options, emit, float_in, load_from_args
+from lfstream.cli._common import add_read_options, emit, float_in, load_from_args, path_arg
 from lfstream.codec.baseline import CODECS, ORDERS
 from lfstream.errors import LFValueError
 
@@ -16,13 +15,13 @@ HELP = "code the views as a pseudo-sequence with HEVC (x265) or AV1 (SVT-AV1) fo
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path, help="light field or LF video to code (any format lfstream reads)")
+    p.add_argument("input", type=path_arg, help="light field or LF video to code (any format lfstream reads)")
     p.add_argument("--codec", choices=tuple(CODECS), default="hevc", help="hevc (x265) or av1 (SVT-AV1)")
     rate = p.add_mutually_exclusive_group()
     rate.add_argument("--qp", type=float_in(0, 63), help="HEVC: constant QP 0..51; AV1: CRF 1..63 (default 34)")
     rate.add_argument("--bpp", type=float_in(1e-6, 24), help="search the quality parameter for this bits per pixel")
     p.add_argument("--order", choices=ORDERS, default="raster", help="the order the views enter the pseudo-sequence")
-    p.add_argument("-o", "--output", type=Path, help="write the decoded light field (.npy, folder or video)")
+    p.add_argument("-o", "--output", type=path_arg, help="write the decoded light field (.npy, folder or video)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     add_read_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -31,11 +30,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from lfstream.codec.baseline import decode_views, encode_at_bpp, encode_views
     from lfstream.io import write_lf
-    from lfstream.io._fs import check_new_file
+    from lfstream.io.outputs import FOLDER, LF_OUTPUTS, check_output
     from lfstream.metrics import bpp, capped, mpsnr, mssim
 
     if args.output is not None:
-        check_new_file(args.output, args.overwrite)
+        check_output(args.output, [args.input], overwrite=args.overwrite, kinds=(*LF_OUTPUTS, FOLDER))
     lo, hi = CODECS[args.codec].quality_range
     if args.qp is not None and not lo <= args.qp <= hi:
         raise LFValueError(f"--qp: {args.codec} takes {lo:g}..{hi:g}, got {args.qp:g}")
@@ -65,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
               "mssim": [float(x) for x in np.atleast_1d(mssim(frames, rec, present=loaded.present))],
               "views_measured": int(loaded.present.sum()) if loaded.present is not None else u * v,
               "encode_s": enc_s, "decode_s": dec_s,
-              "note": "encode_s includes the parameter search when --bpp is given"}
+              "note": "encode_s includes the parameter search when --bpp is given", "output": None}
     if args.output is not None:
         write_lf(args.output, rec if loaded.lf.ndim == 6 else rec[0], overwrite=args.overwrite)
         result["output"] = str(args.output)

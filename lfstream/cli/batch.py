@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from lfstream.cli._common import add_read_options, emit, int_in, read_options
+from lfstream.cli._common import add_read_options, emit, int_in, path_arg, read_options
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
 from lfstream.codec.encoder import PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
@@ -18,8 +17,8 @@ MODES = ("encode", "decode")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("inputs", type=Path, nargs="+", help="LF videos / light fields (encode) or .lfs streams (decode)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (files in it are never overwritten "
+    p.add_argument("inputs", type=path_arg, nargs="+", help="LF videos / light fields (encode) or .lfs streams (decode)")
+    p.add_argument("-o", "--output", type=path_arg, required=True, help="output folder (files in it are never overwritten "
                    "without --overwrite)")
     p.add_argument("--mode", choices=MODES, default="encode", help="encode inputs to .lfs, or decode .lfs streams")
     p.add_argument("--engine", choices=ENGINES, default="local",

@@ -6,9 +6,8 @@ Exit status 0 when every frame passes, 1 when any frame does not, 2 on bad input
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from lfstream.cli._common import add_read_options, float_in
+from lfstream.cli._common import add_read_options, float_in, path_arg
 
 HELP = "compare two light fields or LF videos frame by frame: MPSNR, MSSIM, worst view, largest difference"
 
@@ -34,10 +33,10 @@ def thresholds(args: argparse.Namespace):
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("reference", type=Path, help="the expected light field or LF video (any format lfstream reads)")
-    p.add_argument("test", type=Path, help="the one to judge, with the same view grid and size")
+    p.add_argument("reference", type=path_arg, help="the expected light field or LF video (any format lfstream reads)")
+    p.add_argument("test", type=path_arg, help="the one to judge, with the same view grid and size")
     add_thresholds(p)
-    p.add_argument("--html", type=Path, metavar="OUT.html",
+    p.add_argument("--html", type=path_arg, metavar="OUT.html",
                    help="also write a self-contained report: metric curve, frame x view PSNR heat map, worst view")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --html report")
     add_read_options(p)
@@ -59,17 +58,13 @@ def _table(report) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from lfstream.cli._common import emit, read_options
-    from lfstream.errors import LFValueError
-    from lfstream.io._fs import check_new_file
+    from lfstream.io.outputs import check_output
     from lfstream.testing import compare_report
 
     if args.html is not None:
-        if args.html.suffix.lower() not in (".html", ".htm"):
-            raise LFValueError(f"--html {args.html}: the report is an .html file")
-        check_new_file(args.html, args.overwrite)  # before the work, not after it
-        for given in (args.reference, args.test):
-            if args.html.resolve() == given.resolve():
-                raise LFValueError(f"--html {args.html}: that is an input")
+        # before the work, not after it
+        check_output(args.html, [args.reference, args.test], overwrite=args.overwrite, kinds=(".html", ".htm"),
+                     what="--html")
     report = compare_report(args.reference, args.test, thresholds(args), read_options(args),
                             keep_worst=args.html is not None)
     if args.html is not None:

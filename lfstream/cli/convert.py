@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
-from lfstream.cli._common import add_read_options, emit, float_in
+from lfstream.cli._common import add_read_options, emit, float_in, path_arg
 
 HELP = "convert a light field or LF video to another format (e.g. an .mp4 mosaic to .avi, the quickest to stream)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path, help="any light field lfstream reads (an .lfs is decoded as lfstream decode does)")
-    p.add_argument("output", type=Path, help=".npy (T,U,V,H,W,3), .npz, a mosaic video (lossless: .avi/.nut Ut Video, "
-                   ".mp4/.mov x264 RGB, .mkv FFV1, .webm VP9) or a folder of R_C.png views")
+    p.add_argument("input", type=path_arg, help="any light field lfstream reads (an .lfs is decoded as lfstream decode does)")
+    p.add_argument("output_pos", nargs="?", type=path_arg, metavar="OUTPUT", help="the output (the same as -o)")
+    p.add_argument("-o", "--output", type=path_arg, help=".npy (T,U,V,H,W,3), .npz, a mosaic video (lossless: .avi/.nut "
+                   "Ut Video, .mp4/.mov x264 RGB, .mkv FFV1, .webm VP9) or a folder of R_C.png views")
     p.add_argument("--lossy", action="store_true", help="a video as yuv420p x264 (VP9 in .webm): plays everywhere, "
                    "not exact")
     p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate of a video (default: the input's, else 30)")
@@ -26,14 +26,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from lfstream.cli._common import interrupt_after, read_input
+    from lfstream.cli._common import interrupt_after, one_output, read_input
     from lfstream.errors import BitstreamError, LFFormatError, LFValueError
     from lfstream.io import FrameWriter, write_lf
-    from lfstream.io._fs import check_new_file
+    from lfstream.io.outputs import FOLDER, LF_OUTPUTS, check_output
 
-    check_new_file(args.output, args.overwrite)
-    if args.input.resolve() == args.output.resolve():
-        raise LFValueError(f"{args.output}: the input itself; convert writes a new file")
+    args.output = one_output(args)
+    check_output(args.output, [args.input], overwrite=args.overwrite, kinds=(*LF_OUTPUTS, FOLDER))
     ext = args.output.suffix.lower()
     # written frame by frame as the frames are read (one in memory): a .npy sized by the
     # frames counted first, a .npz deflated from its frames when closed
@@ -75,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
                 damage = exc
                 if not done:
                     raise
-            writer.close(partial=interrupted or damage is not None)
+            with interrupt_after():  # finalising is not cut short: the output stays whole
+                writer.close(partial=interrupted or damage is not None)
         except BaseException:
             writer.abort()
             raise

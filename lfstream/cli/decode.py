@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
-from lfstream.cli._common import add_first_frame, emit, int_in, interrupt_after
+from lfstream.cli._common import add_first_frame, emit, int_in, interrupt_after, path_arg
 from lfstream.codec.decoder import BATCH_RANGE, DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
 from lfstream.models.device import PRECISIONS
 
@@ -14,8 +13,8 @@ HELP = "decode an .lfs stream to a light field (.npy, folder or video)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path, help="the .lfs stream to decode")
-    p.add_argument("-o", "--output", type=Path, required=True, help=".npy (T,U,V,H,W,3), .npz, a video or a folder")
+    p.add_argument("input", type=path_arg, help="the .lfs stream to decode")
+    p.add_argument("-o", "--output", type=path_arg, required=True, help=".npy (T,U,V,H,W,3), .npz, a video or a folder")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto",
                    help="disparity source: the stream's hint, flat (zero), or Depth-Net (default: hint if present)")
     p.add_argument("--no-occlusion", action="store_true", help="warp without occlusion-aware per-view disparity")
@@ -37,30 +36,38 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "shared across CPUs) or bfloat16")
     p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1,
                    help="frames per network batch (and per warp, on a CUDA device)")
-    p.add_argument("--disparity-out", type=Path, help="folder for the centre-view disparity of each frame (PFM)")
+    p.add_argument("--disparity-out", type=path_arg, help="folder for the centre-view disparity of each frame (PFM)")
     add_first_frame(p)
     p.add_argument("--max-frames", type=int_in((1, 1 << 30)), help="decode at most this many frames")
+    p.add_argument("--synthesize-missing", action="store_true",
+                   help="predict the views the source lacked (an --allow-missing input) instead of leaving them out; "
+                        "the output then says which were synthesised")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.codec.bitstream import count_packets, read_header
+    import numpy as np
+
+    from lfstream.codec.bitstream import count_packets, header_present, read_header
     from lfstream.codec.decoder import iter_decode
     from lfstream.errors import BitstreamError, LFFileError
-    from lfstream.io import FrameWriter, write_pfm
-    from lfstream.io._fs import check_new_file, prepare_output_dir
+    from lfstream.io import FrameWriter, write_lf, write_pfm
+    from lfstream.io._fs import prepare_output_dir
+    from lfstream.io.outputs import FOLDER, LF_OUTPUTS, check_disk, check_memory, check_output
     from lfstream.lightfield import frames_in_range
 
-    check_new_file(args.output, args.overwrite)
+    check_output(args.output, [args.input], overwrite=args.overwrite, kinds=(*LF_OUTPUTS, FOLDER))
     if args.disparity_out is not None:
+        check_output(args.disparity_out, [args.input, args.output], overwrite=args.overwrite, kinds=(FOLDER,),
+                     what="--disparity-out")
         # a new or empty folder (or --overwrite): maps of an earlier decode are not replaced
         # unasked, and a file there is one line, not a traceback
         prepare_output_dir(args.disparity_out, args.overwrite)
     # every output is written frame by frame as the frames are decoded (one frame in memory;
     # a video at the stream's frame rate; a .npy sized by the packets counted first; a .npz
     # deflated from its frames when closed: it held the whole video)
-    count, writer, error, write_s, expected = 0, None, None, 0.0, None
+    count, writer, error, write_s, expected, available = 0, None, None, 0.0, None, None
     t0 = time.perf_counter()
     try:
         with open(args.input, "rb") as fh:
@@ -70,22 +77,50 @@ def run(args: argparse.Namespace) -> int:
                 available = count_packets(fh, header)[0]  # the frames up to any damage (none: the decode names it)
                 expected = frames_in_range(available, args.first_frame, args.max_frames, args.input) if available else 0
             fh.seek(0)
+            # sizes before anything is allocated: a frame's working set in memory, a .npy of
+            # every frame on disk
+            frame_bytes = header.views[0] * header.views[1] * header.size[0] * header.size[1] * 3
+            check_memory(4 * frame_bytes, f"{args.input}: decoding a frame")
+            if expected:
+                check_disk(args.output, expected * frame_bytes, f"-o {args.output}")
             hance = "off" if args.no_hance else args.hance
-            for f in iter_decode(fh, depth=args.depth, occlusion=not args.no_occlusion, hance=hance,
+            present = header_present(header)
+            # a stream of one frame decodes to one light field (U, V, H, W, 3), as lfstream
+            # reads a still; a longer stream's range keeps its frame axis
+            if available is None:
+                read_header(fh)
+                available = count_packets(fh, header)[0]
+                fh.seek(0)
+            still = available == 1
+            for f in iter_decode(fh, synthesize_missing=args.synthesize_missing, depth=args.depth,
+                                 occlusion=not args.no_occlusion, hance=hance,
                                  device=args.device, batch=args.batch, deblock=not args.no_deblock,
                                  first_frame=args.first_frame, max_frames=args.max_frames, preset=args.networks,
                                  precision=args.precision):
                 with interrupt_after():  # a frame's outputs are written whole
                     t_write = time.perf_counter()
+                    if still:  # one light field in, one out: (U, V, H, W, 3), views in the folder itself
+                        write_lf(args.output, f.lf, fps=fps, overwrite=args.overwrite,
+                                 present=None if args.synthesize_missing else present)
+                        count += 1
+                        write_s += time.perf_counter() - t_write
+                        if args.disparity_out is not None:
+                            write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
+                        continue
                     if writer is None:
                         # a folder's frames keep the stream's numbers, as the maps do
                         writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite,
-                                             first_index=f.seq)
+                                             first_index=f.seq,
+                                             present=None if args.synthesize_missing else present)
                     writer.write(f.lf)
                     write_s += time.perf_counter() - t_write
                     count += 1
                     if args.disparity_out is not None:
                         write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
+    except LFFileError:  # the output (a writer's error names it) or the input, named already
+        if writer is not None:
+            writer.abort()
+        raise
     except OSError as exc:
         if writer is not None:
             writer.abort()
@@ -94,7 +129,8 @@ def run(args: argparse.Namespace) -> int:
         error = exc
     except KeyboardInterrupt:  # the frames decoded so far, finalised
         if writer is not None:
-            writer.close(partial=True)
+            with interrupt_after():  # finalising is not cut short: the output stays whole
+                writer.close(partial=True)
         raise
     except BaseException:
         if writer is not None:
@@ -103,12 +139,23 @@ def run(args: argparse.Namespace) -> int:
     decode_s = time.perf_counter() - t0 - write_s  # the decoding alone, as for the other outputs
     # a damaged stream still gives a valid output of every frame before the damage
     if writer is not None:
-        writer.close(partial=error is not None)
+        with interrupt_after():  # finalising is not cut short: the output stays whole
+            writer.close(partial=error is not None)
     if error is not None:
         done = (f"{count} complete frame(s) before it written to {args.output}" if count
                 else "no complete frame, nothing written")
         raise BitstreamError(f"{args.input}: {error} ({done})")
-    result = {"frames": count, "first_frame": args.first_frame, "decode_s": decode_s, "output": str(args.output)}
+    result = {"frames": count, "first_frame": args.first_frame, "decode_s": decode_s, "output": str(args.output),
+              "missing_views": [] if present is None else [[int(r), int(c)] for r, c in zip(*np.nonzero(~present))],
+              "synthesized_views": []}
+    if args.synthesize_missing and present is not None:
+        result["synthesized_views"] = result["missing_views"]
     which = f" (from frame {args.first_frame})" if args.first_frame else ""
-    emit(args, result, f"{count} frame(s){which} decoded in {decode_s:.3f} s -> {args.output}")
+    note = ""
+    if result["missing_views"]:
+        views = ", ".join(f"({r}, {c})" for r, c in result["missing_views"])
+        note = (f"; the source's missing views {views} synthesised (predicted, not captured)" if args.synthesize_missing
+                else f"; {len(result['missing_views'])} view(s) the source lacked left out (zero in arrays and videos; "
+                     "--synthesize-missing predicts them)")
+    emit(args, result, f"{count} frame(s){which} decoded in {decode_s:.3f} s -> {args.output}{note}")
     return 0

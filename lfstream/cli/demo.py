@@ -6,7 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
-from lfstream.cli._common import emit, parse_size
+from lfstream.cli._common import emit, parse_size, path_arg
 from lfstream.io._fs import fresh_dir
 
 HELP = "the built-in demo: synthesise a light field, describe it, refocus it"
@@ -14,7 +14,7 @@ DEFAULT_OUTPUT = Path("lfstream-demo")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("-o", "--output", type=Path, help=f"output folder (default ./{DEFAULT_OUTPUT}[-N], never overwritten)")
+    p.add_argument("-o", "--output", type=path_arg, help=f"output folder (default ./{DEFAULT_OUTPUT}[-N], never overwritten)")
     p.add_argument("--size", type=parse_size, default=(375, 540), help="view size HxW of the built-in light field")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 

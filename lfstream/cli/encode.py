@@ -5,9 +5,17 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
-from pathlib import Path
 
-from lfstream.cli._common import add_read_options, emit, float_in, int_in, read_input
+from lfstream.cli._common import (
+    EXIT_INTERRUPTED,
+    FrameBoundaryStop,
+    add_read_options,
+    emit,
+    float_in,
+    int_in,
+    path_arg,
+    read_input,
+)
 from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS
 from lfstream.codec.hint import HintOptions
 from lfstream.codec.jpeg import QUALITY_RANGE
@@ -17,8 +25,8 @@ HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre v
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path, help="light field or LF video to encode (any format lfstream reads)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="the .lfs file (never overwritten without --overwrite)")
+    p.add_argument("input", type=path_arg, help="light field or LF video to encode (any format lfstream reads)")
+    p.add_argument("-o", "--output", type=path_arg, required=True, help="the .lfs file (never overwritten without --overwrite)")
     rate = p.add_mutually_exclusive_group()
     rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="quality of the centre view (default 50)")
     rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target size in bits per pixel: rate control picks the "
@@ -56,14 +64,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from lfstream.codec.bitstream import with_present
     from lfstream.codec.encoder import Encoder, encode_file, with_default_hance_map, write_stream_file
     from lfstream.codec.rate import RATE_CONTROL_CHOOSES, choose_default, rate_control_conflict, uses_default_choice
     from lfstream.errors import LFValueError
-    from lfstream.io._fs import check_new_file
+    from lfstream.io.outputs import check_output
     from lfstream.metrics import bpp
     from lfstream.models.device import check_device
 
-    check_new_file(args.output, args.overwrite)
+    check_output(args.output, [args.input], overwrite=args.overwrite, kinds=(".lfs",))
     check_device(args.device)  # a bad device fails before any reading or encoding
     # options that do not go together fail before the input is read (whole, for --bpp)
     if args.bpp is not None:
@@ -80,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
     residual, residual_mode = args.residual, args.residual_mode
     prediction_db = None  # the default's check of its own prediction (rate.choose_default)
+    stop = None  # Ctrl-C / SIGTERM: the frames encoded so far are kept (not under --bpp's search)
     hance_mapped = False  # strength maps sent (not where the default codes the views themselves)
     hint_scale = HintOptions().hint_scale  # the hint's resolution divisor (the default may double it)
     if args.bpp is not None:
@@ -91,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         quality, depth_hint, preset, residual = rate.quality, rate.depth_hint, rate.preset, rate.residual
         residual_mode = rate.residual_mode
         hint_scale = rate.header.meta.get("hint", {}).get("hint_scale", hint_scale)
-        stats = write_stream_file(args.output, rate.header, rate.packets)
+        stats = write_stream_file(args.output, with_present(rate.header, present), rate.packets)
         stats.encode_s = time.perf_counter() - t0  # the search included
     elif uses_default_choice(args.preset, depth_hint, residual, residual_mode):
         # the default: the centre's coding by the number of views, or the views themselves
@@ -104,15 +114,18 @@ def run(args: argparse.Namespace) -> int:
         hance_mapped = enc.hance_map
         first_s = time.perf_counter() - t0
         preset, depth_hint, residual, residual_mode = enc.preset, enc.depth_hint, enc.residual, enc.residual_mode
-        stats = encode_file(frames, args.output, views, size, enc, fps=fps, present=present, first=first)
+        with FrameBoundaryStop() as stop:
+            stats = encode_file(stop.frames(frames), args.output, views, size, enc, fps=fps, present=present,
+                                first=first)
         stats.encode_s += first_s  # frame 0's fast encode and the check
         prediction_db = choice.prediction_db
         hint_scale = enc.hint_options.hint_scale
     else:
-        stats = encode_file(frames, args.output, views, size,
-                            Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
-                                    residual_mode=residual_mode, device=args.device, hance_map=args.hance_map), fps=fps,
-                            present=present)
+        with FrameBoundaryStop() as stop:
+            stats = encode_file(stop.frames(frames), args.output, views, size,
+                                Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
+                                        residual_mode=residual_mode, device=args.device, hance_map=args.hance_map),
+                                fps=fps, present=present)
         hance_mapped = args.hance_map
     shape = (stats.frames, *source.first.shape)  # a video read frame by frame: as many as were encoded
     result = dataclasses.asdict(stats)
@@ -121,12 +134,12 @@ def run(args: argparse.Namespace) -> int:
                    "hint_scale": hint_scale if depth_hint else None,
                    "preset": preset, "residual": residual, "residual_mode": residual_mode if residual is not None else None,
                    "residual_bpp": bpp(stats.residual_bytes, shape), "hance_map": bool(hance_mapped)})
-    if prediction_db is not None:
-        result["prediction_db"] = prediction_db
-    if rate is not None:
-        result["rate_control"] = {"target_bpp": args.bpp, "candidates": list(rate.candidates)}
+    # the same keys whatever was chosen (null where a key does not apply)
+    result["prediction_db"] = prediction_db
+    result["rate_control"] = None if rate is None else {"target_bpp": args.bpp, "candidates": list(rate.candidates)}
+    result["interrupted"] = bool(stop is not None and stop.stopped)
     emit(args, result, lambda r: f"{r['frames']} frame(s) -> {args.output}: {r['bytes']} bytes, {r['bpp']:.5f} bpp"
          + (f" (hint 1/{hint_scale} {r['hint_bpp']:.5f} bpp)" if depth_hint else "") + f", {preset} q{quality}"
          + (f", residual q{residual} {residual_mode} ({r['residual_bpp']:.5f} bpp)" if residual is not None else "")
-         + f", encoded in {r['encode_s']:.3f} s")
-    return 0
+         + f", encoded in {r['encode_s']:.3f} s" + (" (interrupted: the frames before it kept)" if r["interrupted"] else ""))
+    return EXIT_INTERRUPTED if result["interrupted"] else 0

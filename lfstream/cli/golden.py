@@ -8,9 +8,8 @@ Exit status 0 when none regressed, 1 when any did, 2 on bad input.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from lfstream.cli._common import add_read_options
+from lfstream.cli._common import add_read_options, path_arg
 
 HELP = "record golden files of an LF video's frames, or check a video against one"
 
@@ -23,18 +22,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     rec = sub.add_parser("record", help="write a golden file of INPUT's frames",
                          description="write a golden file of INPUT's frames: each frame's SHA-256 and, with "
                                      "--reference, its MPSNR, MSSIM, worst view and largest difference against it")
-    rec.add_argument("input", type=Path, help="the light field or LF video to pin (any format lfstream reads)")
-    rec.add_argument("-o", "--output", type=Path, required=True, help="the golden file (.json)")
-    rec.add_argument("--reference", type=Path, help="record metrics against this light field or video too")
+    rec.add_argument("input", type=path_arg, help="the light field or LF video to pin (any format lfstream reads)")
+    rec.add_argument("-o", "--output", type=path_arg, required=True, help="the golden file (.json)")
+    rec.add_argument("--reference", type=path_arg, help="record metrics against this light field or video too")
     rec.add_argument("--overwrite", action="store_true", help="replace an existing golden file")
     add_read_options(rec)
     rec.add_argument("--json", action="store_true", help="print one JSON object")
     chk = sub.add_parser("check", help="check INPUT's frames against a golden file",
                          description="check INPUT's frames against a golden file: identical, changed within "
                                      "tolerance, or regressed")
-    chk.add_argument("input", type=Path, help="the light field or LF video to check")
-    chk.add_argument("golden", type=Path, help="the golden file")
-    chk.add_argument("--reference", type=Path, help="the reference for the metrics (default: the golden's own)")
+    chk.add_argument("input", type=path_arg, help="the light field or LF video to check")
+    chk.add_argument("golden", type=path_arg, help="the golden file")
+    chk.add_argument("--reference", type=path_arg, help="the reference for the metrics (default: the golden's own)")
     chk.add_argument("--strict", action="store_true",
                      help="a metric better than its golden value by more than its tolerance also fails")
     add_thresholds(chk)
@@ -48,16 +47,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _record(args: argparse.Namespace) -> int:
     from lfstream.cli._common import emit, read_options
-    from lfstream.errors import LFValueError
-    from lfstream.io._fs import check_new_file
+    from lfstream.io.outputs import check_output
     from lfstream.testing import golden
 
-    if args.output.suffix.lower() != ".json":
-        raise LFValueError(f"-o {args.output}: a golden file is .json")
-    check_new_file(args.output, args.overwrite)
-    for given in (args.input, args.reference):
-        if given is not None and args.output.resolve() == given.resolve():
-            raise LFValueError(f"-o {args.output}: that is an input")
+    check_output(args.output, [args.input, args.reference], overwrite=args.overwrite, kinds=(".json",))
     opts = read_options(args)
     settings = {"command": "lfstream golden record", "reading": {k: v for k, v in vars(opts).items() if v}}
     g = golden.record(args.input, args.reference, opts, settings)

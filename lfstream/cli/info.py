@@ -7,13 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.cli._common import add_read_options, coding_layers, emit, load_from_args
+from lfstream.cli._common import add_read_options, coding_layers, emit, load_from_args, path_arg
 
 HELP = "describe a light field or LF video: format, frames, views, view size, dtype, bytes"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path, help="file or folder")
+    p.add_argument("input", type=path_arg, help="file or folder")
     add_read_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -36,6 +36,9 @@ def describe(loaded) -> dict:
         else [[int(r), int(c)] for r, c in zip(*np.nonzero(~loaded.present))],
         "has_weight": loaded.weight is not None,
         "has_disparity": loaded.disparity is not None,
+        "disparity_range": None,
+        "stream": None,
+        "video": None,
     }
     if loaded.disparity is not None:
         d = loaded.disparity
@@ -162,7 +165,7 @@ def _describe_input(args: argparse.Namespace) -> dict:
     missing = None if video.present is None else [[int(r), int(c)] for r, c in zip(*np.nonzero(~video.present))]
     out = {"path": str(args.input), "format": fmt, "frames": frames, "views": [u, v], "size": [h, w], "channels": 3,
            "dtype": "uint8", "bytes": frames * u * v * h * w * 3, "fps": video.fps, "missing_views": missing,
-           "has_weight": False, "has_disparity": False}
+           "has_weight": False, "has_disparity": False, "disparity_range": None, "stream": None, "video": None}
     if fmt == "lfs":
         out["stream"] = describe_stream(args.input, frames)
     elif fmt in ("video", "view-videos"):

@@ -22,9 +22,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--microlens-pitch", type=float_in(1e-9, 1e3), metavar="MM", help="default: aperture / M")
     p.add_argument("--focus-distance", type=float, default=float("inf"), metavar="M",
                    help="main-lens focus in metres (default infinity)")
-    p.add_argument("--slope", type=float, nargs="+", action="extend", default=[], metavar="S",
+    p.add_argument("--slope", type=float_in(-1e6, 1e6), nargs="+", action="extend", default=[], metavar="S",
                    help="refocus shifts in pixels per view step (Hahne's a)")
-    p.add_argument("--alpha", type=float, nargs="+", action="extend", default=[], metavar="A",
+    p.add_argument("--alpha", type=float_in(-1e6, 1e6), nargs="+", action="extend", default=[], metavar="A",
                    help="refocus parameters alpha (slope = 1 - 1/alpha)")
     p.add_argument("--json", action="store_true", help="one JSON object; infinite distances are null")
 

@@ -8,9 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.cli._common import add_read_options, emit, float_in, interrupt_after, parse_float_list, read_input
-from lfstream.errors import LFFileError, LFValueError
-from lfstream.io._fs import prepare_output_dir
+from lfstream.cli._common import add_read_options, emit, float_in, interrupt_after, parse_float_list, path_arg, read_input
+from lfstream.errors import LFValueError
 from lfstream.lightfield import axes_as_list, canonical_views
 
 HELP = "render a focal stack (PNG per plane, MP4 and GIF focal sweep)"
@@ -18,9 +17,11 @@ HELP = "render a focal stack (PNG per plane, MP4 and GIF focal sweep)"
 METHODS = ("sas", "fourier", "refnet")
 
 
-def parse_alphas(text: str) -> list[float]:
-    """``seed`` (the seed's sixteen alphas, the default; as ``stream --alphas seed``) or a
-    comma list of alphas."""
+def parse_alphas(text: str) -> list[float] | str:
+    """``auto`` (planes fitted to the scene's disparity, the default, as the stream's), ``seed``
+    (the seed's sixteen alphas, as ``stream --alphas seed``) or a comma list of alphas."""
+    if text.strip().lower() == "auto":
+        return "auto"
     if text.strip().lower() == "seed":
         from lfstream.optics import SEED_ALPHAS
 
@@ -29,12 +30,15 @@ def parse_alphas(text: str) -> list[float]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path, help="light field or LF video to refocus (any format lfstream reads)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created; must be empty)")
-    p.add_argument("--alphas", type=parse_alphas, metavar="seed|A,B,...",
-                   help="refocus parameters alpha (default: seed, the seed's 0.125,0.25,...,2.0)")
+    p.add_argument("input", type=path_arg, help="light field or LF video to refocus (any format lfstream reads)")
+    p.add_argument("-o", "--output", type=path_arg, required=True, help="output folder (created; must be empty unless "
+                   "--overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="write into a folder that already holds files")
+    p.add_argument("--alphas", type=parse_alphas, metavar="auto|seed|A,B,...",
+                   help="focal planes: auto (default, as lfstream stream's: fitted to the first frame's disparity "
+                        "range), seed (the seed's alpha 0.125,0.25,...,2.0) or a list of alphas")
     p.add_argument("--slopes", type=parse_float_list, help="instead of alphas: shifts in pixels per view step")
-    p.add_argument("--slope-range", nargs=3, type=float, metavar=("LO", "HI", "N"),
+    p.add_argument("--slope-range", nargs=3, type=float_in(-1e9, 1e9), metavar=("LO", "HI", "N"),
                    help="N slopes evenly spaced from LO to HI (a focus range in disparity units)")
     p.add_argument("--method", choices=METHODS, default="sas", help="sas (shift-and-sum), fourier (Fourier slice) or refnet")
     p.add_argument("--device", default="cpu", help="where RefNet runs (method refnet)")
@@ -52,26 +56,42 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
-    from lfstream.io import VideoWriter, write_image, write_video
-    from lfstream.io._fs import atomic_write_text
-    from lfstream.refocus import focal_stack, plane_records, resolve_slopes, slope_range
+    from lfstream.io.outputs import FOLDER, OutputFolder, check_output
+    from lfstream.refocus import resolve_slopes, slope_range
 
     given = [x is not None for x in (args.alphas, args.slopes, args.slope_range)]
     if sum(given) > 1:
         raise LFValueError("give one of --alphas, --slopes, --slope-range")
     if args.slope_range:
         lo, hi, n = args.slope_range
+        from lfstream.refocus.planes import MAX_PLANES
+
+        if not (n >= 1 and float(n).is_integer()):
+            raise LFValueError(f"--slope-range: N is a count of planes, got {n:g}")
+        if n > MAX_PLANES:
+            raise LFValueError(f"--slope-range: {n:g} planes; at most {MAX_PLANES}")
         slopes = slope_range(lo, hi, int(n))
+    elif args.slopes is None and args.alphas in (None, "auto"):
+        slopes = None  # fitted to the first frame (the stream's default)
     else:
         slopes = resolve_slopes(args.alphas, args.slopes)
-    if args.output.exists() and (not args.output.is_dir() or any(args.output.iterdir())):
-        raise LFFileError(f"{args.output}: already exists and is not an empty folder")
+    check_output(args.output, [args.input], overwrite=args.overwrite, kinds=(FOLDER,))
+    with OutputFolder(args.output, overwrite=args.overwrite) as claim:
+        return _refocus(args, slopes, claim.path)
+
+
+def _refocus(args: argparse.Namespace, slopes, out: Path) -> int:
+    import json
+
+    from lfstream.io import VideoWriter, write_image, write_video
+    from lfstream.io._fs import atomic_write_text
+    from lfstream.refocus import focal_stack, plane_records
+
     source = read_input(args, count_frames=True)
     axes = _view_axes(source.first, source.present) if args.axes == "auto" else None
+    if slopes is None:
+        slopes = _scene_slopes(source.first, source.present, axes)
     extra = {"device": args.device} if args.method == "refnet" else {}
-    out = prepare_output_dir(args.output)
     single = source.count == 1
     files: list[str] = []
     planes = plane_records(slopes)
@@ -124,7 +144,8 @@ def run(args: argparse.Namespace) -> int:
             writer.abort()
         raise
     for writer in plane_videos:
-        writer.close()
+        with interrupt_after():  # finalising is not cut short: the output stays whole
+            writer.close()
         files.append(str(writer.path))
     atomic_write_text(out / "planes.json", json.dumps({"planes": planes, "updates": []}, indent=1))
     viewer = None
@@ -142,6 +163,16 @@ def run(args: argparse.Namespace) -> int:
          f" -> {out}" + (" (interrupted)" if interrupted else "")
          + (f"\nopen {viewer.resolve().as_uri()} to click-to-focus" if viewer is not None else ""))
     return 130 if interrupted else 0
+
+
+def _scene_slopes(first, present, axes):
+    """The stream's default planes (``--alphas auto``): fitted to the first frame's disparity,
+    estimated as the encoder's depth hint estimates it."""
+    from lfstream.codec.hint import estimate_hint_map
+    from lfstream.refocus import scene_slopes
+
+    hint = estimate_hint_map(first, present=present, axes=axes)
+    return scene_slopes(hint.disparity, first.shape[:2])
 
 
 def _view_axes(first: np.ndarray, present: np.ndarray | None) -> np.ndarray | None:

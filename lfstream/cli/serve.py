@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.io._fs import fresh_dir, prepare_output_dir
+    from lfstream.io.outputs import fresh_output_folder
     from lfstream.stream import Pipeline
     from lfstream.stream.report import stopped_summary
     from lfstream.stream.transport import TcpReceiver
@@ -30,17 +30,26 @@ def run(args: argparse.Namespace) -> int:
     cfg = _pipeline.pipeline_config(args)
     while True:
         # each sender's outputs in a folder of their own, never one that holds results
-        out = prepare_output_dir(fresh_dir(args.output or "lfstream-serve"))
-        receiver = TcpReceiver(args.host, args.port, timeout_s=args.timeout)
-        if not args.json:
-            print(f"listening on {receiver.address[0]}:{receiver.address[1]} -> {out}", file=sys.stderr)
+        claim = fresh_output_folder(args.output or "lfstream-serve")
+        out = claim.path
+        receiver = None
         try:
-            with _pipeline.single_threaded_opencv():
-                summary = Pipeline(None, cfg, out, receiver=receiver,
-                                   progress=_pipeline.progress_callback(args)).run()
-        except KeyboardInterrupt:
-            summary = stopped_summary("tcp")
-        _pipeline.write_page(args, summary, out)
-        _pipeline.report(args, summary, out)
+            try:
+                receiver = TcpReceiver(args.host, args.port, timeout_s=args.timeout)
+                # on stderr whatever --json says: a script needs the port (--port 0) before it sends
+                print(f"listening on {receiver.address[0]}:{receiver.address[1]} -> {out}", file=sys.stderr,
+                      flush=True)
+                with _pipeline.single_threaded_opencv():
+                    summary = Pipeline(None, cfg, out, receiver=receiver,
+                                       progress=_pipeline.progress_callback(args)).run()
+            except KeyboardInterrupt:  # at any moment after the folder is claimed: a labelled summary
+                summary = stopped_summary("tcp")
+                if receiver is not None:
+                    receiver.close()
+            summary["address"] = None if receiver is None else [receiver.address[0], receiver.address[1]]
+            _pipeline.write_page(args, summary, out)
+            _pipeline.report(args, summary, out)
+        finally:
+            claim.release()
         if not args.keep_open or summary["interrupted"]:
             return 130 if summary["interrupted"] else 0

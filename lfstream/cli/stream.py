@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from lfstream.cli import _pipeline
-from lfstream.cli._common import add_read_options, float_in, int_in, read_options
+from lfstream.cli._common import add_read_options, float_in, int_in, path_arg, read_options
 from lfstream.codec.encoder import PRESETS
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.residual import RESIDUAL_MODES
@@ -19,7 +18,7 @@ HELP = "stream an LF video (default: the built-in synthetic clip) through the wh
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", type=Path, nargs="?", help="LF video / light field (default: built-in synthetic clip)")
+    p.add_argument("input", type=path_arg, nargs="?", help="LF video / light field (default: built-in synthetic clip)")
     p.add_argument("--transport", choices=TRANSPORTS, default="inproc",
                    help="how packets travel from encoder to decoder: in process, through a file, or over loopback TCP")
     p.add_argument("--to", help="HOST:PORT of an `lfstream serve`: send there instead of decoding here")
@@ -49,54 +48,62 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.errors import LFFormatError, LFStreamError, LFValueError
-    from lfstream.io._fs import fresh_dir, prepare_output_dir, remove_if_made_empty
-    from lfstream.stream import Pipeline, Source, file_source, render_builtin_clip, synthetic_source
-    from lfstream.stream.report import stopped_summary
-    from lfstream.stream.sources import PRERENDER_MAX_FRAMES
+    from lfstream.io.outputs import FOLDER, OutputFolder, check_output, fresh_output_folder
     from lfstream.stream.transport import TcpSender, parse_address
 
     _pipeline.check_output_folder(args.output)
-    sender, out, created = None, None, False
+    sender, out, claim = None, None, None
     if args.to:
         sender = TcpSender(*parse_address(args.to))
     else:
-        # the folder first: a Ctrl-C at any moment after this still leaves a labelled summary
-        target = Path(args.output or fresh_dir("lfstream-out"))
-        created = not target.exists()
-        out = prepare_output_dir(target)
+        # the folder first, claimed by this run (a second run naming it is refused): a Ctrl-C
+        # at any moment after this still leaves a labelled summary
+        if args.output is not None:
+            check_output(args.output, [args.input], overwrite=True, kinds=(FOLDER,))
+            claim = OutputFolder(args.output, overwrite=args.overwrite)
+        else:
+            claim = fresh_output_folder("lfstream-out")
+        out = claim.path
     try:
-        try:
-            if args.input is None:
-                if args.first_frame or args.max_frames is not None:
-                    raise LFValueError("--first-frame, --max-frames: they choose the frames of an input file; the "
-                                       "built-in clip takes --frames N")
-                args.frames = BUILTIN_FRAMES if args.frames is None else args.frames
-                # rendered into its cache while the kernels load, where it is not there yet
-                # (and not so long that the wait would outlast them: PRERENDER_MAX_FRAMES)
-                ahead = args.frames <= PRERENDER_MAX_FRAMES
-                source = Source(synthetic_source(frames=args.frames), None, None, args.frames,
-                                prepare=(lambda stop: render_builtin_clip(frames=args.frames, stop=stop)) if ahead
-                                else None)
-            else:
-                if args.frames is not None:  # (it was ignored: every frame of the input streamed)
-                    raise LFValueError("--frames: the built-in clip's length; an input file's frames are chosen "
-                                       "by --max-frames N (and --first-frame K)")
-                source = file_source(args.input, read_options(args))
-            cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp,
-                                            depth_hint=not args.no_depth_hint, preset=args.preset,
-                                            residual=args.residual, residual_mode=args.residual_mode,
-                                            hance_map=args.hance_map, transport=args.transport,
-                                            fps=source.fps or 30.0)
-            pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
-                            stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
-                            present=source.present, prepare=source.prepare)
-            with _pipeline.single_threaded_opencv():
-                summary = pipe.run()
-        except LFStreamError:
-            if out is not None:  # an input or options refused, or a stage failed, before anything was
-                remove_if_made_empty(out, created)  # written: no empty folder left behind
-            raise
+        return _stream(args, sender, out)
+    finally:
+        if claim is not None:
+            claim.release()
+
+
+def _stream(args: argparse.Namespace, sender, out) -> int:
+    from lfstream.errors import LFFormatError, LFValueError
+    from lfstream.stream import Pipeline, Source, file_source, render_builtin_clip, synthetic_source
+    from lfstream.stream.report import stopped_summary
+    from lfstream.stream.sources import PRERENDER_MAX_FRAMES
+
+    try:
+        if args.input is None:
+            if args.first_frame or args.max_frames is not None:
+                raise LFValueError("--first-frame, --max-frames: they choose the frames of an input file; the "
+                                   "built-in clip takes --frames N")
+            args.frames = BUILTIN_FRAMES if args.frames is None else args.frames
+            # rendered into its cache while the kernels load, where it is not there yet
+            # (and not so long that the wait would outlast them: PRERENDER_MAX_FRAMES)
+            ahead = args.frames <= PRERENDER_MAX_FRAMES
+            source = Source(synthetic_source(frames=args.frames), None, None, args.frames,
+                            prepare=(lambda stop: render_builtin_clip(frames=args.frames, stop=stop)) if ahead
+                            else None)
+        else:
+            if args.frames is not None:  # (it was ignored: every frame of the input streamed)
+                raise LFValueError("--frames: the built-in clip's length; an input file's frames are chosen "
+                                   "by --max-frames N (and --first-frame K)")
+            source = file_source(args.input, read_options(args))
+        cfg = _pipeline.pipeline_config(args, quality=args.quality, bpp=args.bpp,
+                                        depth_hint=not args.no_depth_hint, preset=args.preset,
+                                        residual=args.residual, residual_mode=args.residual_mode,
+                                        hance_map=args.hance_map, transport=args.transport,
+                                        fps=source.fps or 30.0)
+        pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
+                        stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
+                        present=source.present, prepare=source.prepare)
+        with _pipeline.single_threaded_opencv():
+            summary = pipe.run()
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)
         summary = stopped_summary("tcp" if args.to else args.transport)

@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from lfstream.cli._common import emit
+from lfstream.cli._common import emit, float_in, path_arg
 
 HELP = "write index.html, a self-contained click-to-focus page, for a folder of focal stacks"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("folder", type=Path, help="an output folder of lfstream stream or lfstream refocus")
-    p.add_argument("--fps", type=float, help="playback rate of a video (default: the stream's, else 8)")
+    p.add_argument("folder", type=path_arg, help="an output folder of lfstream stream or lfstream refocus")
+    p.add_argument("--fps", type=float_in(1e-3, 1000), help="playback rate of a video (default: the stream's, else 8)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 

@@ -51,9 +51,10 @@ import json
 import struct
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import BinaryIO
 
+import numpy as np
 import zstandard
 
 from lfstream.errors import BitstreamError, LFValueError
@@ -117,6 +118,33 @@ class StreamHeader:
         u, v = self.views
         return min(int(limits.max_payload_factor * u * v * self.size[0] * self.size[1] * 3),
                    limits.max_frame_bytes) + (1 << 20)
+
+
+def with_present(header: StreamHeader, present: np.ndarray | None) -> StreamHeader:
+    """``header`` recording which views existed in the source (``meta["present"]``: rows of
+    0/1), where some were missing; unchanged where all were (or no mask is given)."""
+    if present is None:
+        return header
+    mask = np.asarray(present, bool)
+    if mask.shape != tuple(header.views):
+        raise LFValueError(f"present: expected a {header.views[0]}x{header.views[1]} mask, got {mask.shape}")
+    if mask.all():
+        return header
+    return replace(header, meta={**header.meta, "present": mask.astype(int).tolist()})
+
+
+def header_present(header: StreamHeader) -> np.ndarray | None:
+    """The ``(U, V)`` mask of views the source had (:func:`with_present`); ``None``: all."""
+    rows = header.meta.get("present")
+    if rows is None:
+        return None
+    try:
+        mask = np.asarray(rows, bool)
+    except (TypeError, ValueError):
+        mask = None
+    if mask is None or mask.shape != tuple(header.views) or not mask[header.views[0] // 2, header.views[1] // 2]:
+        raise BitstreamError("header: a malformed present-view mask")
+    return mask
 
 
 @dataclass(frozen=True)
@@ -290,6 +318,7 @@ def read_header(fh: BinaryIO, limits: Limits = Limits()) -> StreamHeader:
                           meta=_decompress_json(meta, limits.max_meta_bytes, "header",
                                                 dictionary=meta_coding == META_WITH_DICTIONARY))
     check_header_values(header, limits)
+    header_present(header)  # a malformed mask fails here, with the header
     return header
 
 

@@ -21,7 +21,17 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, Limits, Packet, StreamHeader, count_packets, iter_packets, read_header
+from lfstream.codec.bitstream import (
+    CODEC_AV1,
+    CODEC_JPEG,
+    Limits,
+    Packet,
+    StreamHeader,
+    count_packets,
+    header_present,
+    iter_packets,
+    read_header,
+)
 from lfstream.codec.hance import HANCE_MAP_PRESET
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
@@ -481,7 +491,8 @@ def _to_host(tensor) -> np.ndarray:
 def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
                 max_frames: int | None = None, hance: str = "auto", device: str = "cpu",
                 batch: int = 1, deblock: bool = True, out: np.ndarray | None = None,
-                first_frame: int = 0, preset: str = "fast", precision: str = "auto") -> Iterator[DecodedFrame]:
+                first_frame: int = 0, preset: str = "fast", precision: str = "auto",
+                synthesize_missing: bool = False) -> Iterator[DecodedFrame]:
     """Decodes a stream frame by frame (networks batched over ``batch`` frames); every
     complete frame before a damaged packet is yielded, then :class:`BitstreamError` names
     the damaged frame. ``deblock``, ``preset``, ``precision``: :class:`Decoder`'s. ``out``: a ``(T, U, V, H, W,
@@ -501,6 +512,8 @@ def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits 
     dec = Decoder(header, depth=depth, occlusion=occlusion, hance=hance, device=device, deblock=deblock,
                   preset=preset, precision=precision)
     pending: list[Packet] = []
+    present = header_present(header)
+    missing = None if present is None or synthesize_missing else ~present
 
     done = 0  # frames decoded: the index into ``out`` of the next
 
@@ -509,7 +522,11 @@ def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits 
         dests = None if out is None else [out[k] if k < len(out) else None
                                           for k in range(done, done + len(packets))]
         done += len(packets)
-        return dec.decode_batch(packets, out=dests)
+        frames = dec.decode_batch(packets, out=dests)
+        if missing is not None:  # views the source never had are zero, never invented
+            for f in frames:
+                f.lf[missing] = 0
+        return frames
 
     try:
         for k, packet in enumerate(iter_packets(fh, header, limits)):
@@ -542,7 +559,8 @@ def stack_frames(frames: list[np.ndarray]) -> np.ndarray:
 
 def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
            hance: str = "auto", device: str = "cpu", deblock: bool = True, first_frame: int = 0,
-           max_frames: int | None = None, preset: str = "fast", precision: str = "auto") -> np.ndarray:
+           max_frames: int | None = None, preset: str = "fast", precision: str = "auto",
+           synthesize_missing: bool = False) -> np.ndarray:
     """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8 (``deblock``: :attr:`Decoder.deblock`;
     ``preset``: the networks' weights, :attr:`Decoder.preset`; ``precision``: theirs,
     :attr:`Decoder.precision`);
@@ -573,7 +591,8 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
     frames: list[np.ndarray] = []
     try:
         for f in iter_decode(buf, depth, occlusion, limits, hance=hance, device=device, deblock=deblock, out=out,
-                             first_frame=first_frame, max_frames=max_frames, preset=preset, precision=precision):
+                             first_frame=first_frame, max_frames=max_frames, preset=preset, precision=precision,
+                             synthesize_missing=synthesize_missing):
             frames.append(f.lf)
     except BitstreamError as exc:
         exc.partial = frames_array(frames, out) if frames else None  # type: ignore[attr-defined]

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_version
+from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_version, with_present
 from lfstream.codec.hint import HintOptions, HintTracker
 from lfstream.codec.intra import AV1_MIN_VIEW, CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
@@ -472,7 +472,7 @@ def encode(
         if conflict:
             raise LFValueError(f"{conflict}: rate control (bpp) {RATE_CONTROL_CHOOSES[conflict]}")
         # rate control encoded every frame already: its stream is the answer
-        return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream()
+        return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream(present)
     from lfstream.codec.rate import choose_default, uses_default_choice
 
     first = None
@@ -488,7 +488,7 @@ def encode(
                       gain_grid=gain_grid, preset=preset or DEFAULT_PRESET, residual=residual,
                       residual_mode=residual_mode, post_filter=post_filter, device=device, hance_map=hance_map)
     buf = io.BytesIO()
-    writer = StreamWriter(buf, enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps))
+    writer = StreamWriter(buf, with_present(enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps), present))
     for t, frame in enumerate(frames):
         writer.write(first if t == 0 and first is not None else
                      enc.encode_frame(frame, t, int(round(t * 1e6 / fps)), present))
@@ -538,7 +538,7 @@ def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tu
             spent += time.perf_counter() - t0
             yield packet
 
-    stats = write_stream_file(path, encoder.header(views, size, fps), packets())
+    stats = write_stream_file(path, with_present(encoder.header(views, size, fps), present), packets())
     stats.encode_s = spent
     return stats
 

@@ -14,6 +14,7 @@ the same bytes (SVT-AV1 at a fixed preset, checked by tests/codec/test_intra.py)
 
 from __future__ import annotations
 
+import errno
 import os
 import platform
 from dataclasses import dataclass
@@ -202,6 +203,11 @@ def encode_av1(img: np.ndarray, quality: int, speed: int = 12) -> bytes:
 AV1_THREADED_MIN_PIXELS = 1 << 20
 
 
+def max_av1_pixels(size: tuple[int, int]) -> int:
+    """The most pixels a decoded AV1 frame of views of ``size`` may have (padded to even)."""
+    return (size[0] + size[0] % 2) * (size[1] + size[1] % 2)
+
+
 def decode_av1(data: bytes, size: tuple[int, int], frame: int | None = None) -> np.ndarray:
     """AV1 key-frame bytes to uint8 RGB ``(H, W, 3)``; checks the size the header promised."""
     import av
@@ -209,10 +215,14 @@ def decode_av1(data: bytes, size: tuple[int, int], frame: int | None = None) -> 
     h, w = size
     try:
         ctx = av.CodecContext.create("libdav1d", "r")
+        # dav1d refuses a frame larger than the stream's before allocating it
+        ctx.options = {"max_pixels": str(max_av1_pixels(size))}
         if h * w < AV1_THREADED_MIN_PIXELS:
             ctx.thread_count = 1
         frames = list(ctx.decode(av.Packet(data))) + list(ctx.decode(None))
     except (av.error.FFmpegError, ValueError) as exc:
+        if getattr(exc, "errno", None) == errno.ERANGE:  # refused by max_pixels
+            raise BitstreamError(f"centre view's AV1 frame is larger than the header says ({h}x{w})", frame) from exc
         raise BitstreamError(f"centre view is not a decodable AV1 frame ({exc})", frame) from exc
     if len(frames) != 1:
         raise BitstreamError(f"centre view holds {len(frames)} AV1 frames, expected 1", frame)
@@ -241,4 +251,4 @@ def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int 
 __all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "AV1_MIN_SIZE", "AV1_MIN_VIEW", "av1_fits",
            "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
            "svtav1_encoder", "quiet_svt_log", "svt_options", "SVT_X86_ASM",
-           "AV1_THREADED_MIN_PIXELS", "encode_av1", "decode_av1", "encode_centre", "decode_centre"]
+           "AV1_THREADED_MIN_PIXELS", "encode_av1", "decode_av1", "max_av1_pixels", "encode_centre", "decode_centre"]

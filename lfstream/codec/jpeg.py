@@ -35,8 +35,48 @@ def encode_jpeg(img: np.ndarray, quality: int) -> bytes:
     return data[:2] + data[2 + len(_JFIF_APP0):] if data[2:2 + len(_JFIF_APP0)] == _JFIF_APP0 else data
 
 
+#: Start-of-frame markers (baseline, progressive, lossless, arithmetic): their segment holds
+#: the image's size.
+_SOF_MARKERS = frozenset({0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF})
+
+
+def jpeg_size(data: bytes) -> tuple[int, int] | None:
+    """``(H, W)`` from a JPEG's start-of-frame segment, read before anything is decoded;
+    ``None`` where the bytes are not a JPEG whose size can be found before its scan."""
+    if len(data) < 4 or data[0] != 0xFF or data[1] != 0xD8:
+        return None
+    pos = 2
+    while pos + 4 <= len(data):
+        if data[pos] != 0xFF:
+            return None
+        marker = data[pos + 1]
+        if marker == 0xFF:  # fill byte
+            pos += 1
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:  # no length
+            pos += 2
+            continue
+        length = (data[pos + 2] << 8) | data[pos + 3]
+        if marker in _SOF_MARKERS:
+            if length < 8 or pos + 9 > len(data):
+                return None
+            h = (data[pos + 5] << 8) | data[pos + 6]
+            w = (data[pos + 7] << 8) | data[pos + 8]
+            return h, w
+        if marker in (0xDA, 0xD9) or length < 2:  # the scan, or the end, before any frame header
+            return None
+        pos += 2 + length
+    return None
+
+
 def decode_jpeg(data: bytes, size: tuple[int, int], frame: int | None = None) -> np.ndarray:
-    """JPEG bytes to uint8 RGB ``(H, W, 3)``; checks the size the stream header promised."""
+    """JPEG bytes to uint8 RGB ``(H, W, 3)``; checks the size the stream header promised
+    before decoding (a few hundred bytes can declare a frame of gigabytes)."""
+    declared = jpeg_size(data)
+    if declared is None:
+        raise BitstreamError("centre view is not a decodable JPEG (no frame header before its scan)", frame)
+    if declared != tuple(size):
+        raise BitstreamError(f"centre view is {declared[0]}x{declared[1]}, header says {size[0]}x{size[1]}", frame)
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
     if img is None:
         raise BitstreamError("centre view is not a decodable JPEG", frame)

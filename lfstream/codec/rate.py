@@ -144,9 +144,12 @@ class RateChoice:
     residual: int | None = None  # the residual layer's quality; None: no residual
     residual_mode: str = "prediction"  # what the residual codes (lfstream.codec.residual.RESIDUAL_MODES)
 
-    def stream(self) -> bytes:
-        """The chosen ``.lfs`` stream."""
-        return pack_header(self.header) + b"".join(pack_packet(p, self.header.version) for p in self.packets)
+    def stream(self, present: np.ndarray | None = None) -> bytes:
+        """The chosen ``.lfs`` stream (recording ``present``, the views the source had)."""
+        from lfstream.codec.bitstream import with_present
+
+        return pack_header(with_present(self.header, present)) + b"".join(
+            pack_packet(p, self.header.version) for p in self.packets)
 
 
 @dataclass(frozen=True)

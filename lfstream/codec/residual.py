@@ -44,6 +44,7 @@ whatever the decoder's settings.
 
 from __future__ import annotations
 
+import errno
 import os
 import struct
 
@@ -300,6 +301,10 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
         packets.append(data[pos:pos + n])
         pos += n
     ctx = av.CodecContext.create("libdav1d", "r")
+    from lfstream.codec.intra import max_av1_pixels
+
+    # dav1d refuses a frame larger than the coded views before allocating it
+    ctx.options = {"max_pixels": str(max_av1_pixels((h, w)))}
     # Worker threads where they pay (:func:`_decoder_threads`). A test-suite run once hung
     # with dav1d's workers parked on futexes while a sequence was torn down:
     # the decoder was then freed with frames in flight (a loop that stopped early, without a
@@ -314,6 +319,8 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
         decoded.extend(ctx.decode(None))
     except (av.error.FFmpegError, ValueError) as exc:
         _drain(ctx)
+        if getattr(exc, "errno", None) == errno.ERANGE:  # refused by max_pixels
+            raise BitstreamError(f"residual frames are larger than the header says ({h}x{w})", frame) from exc
         raise BitstreamError(f"residual is not a decodable AV1 sequence ({exc})", frame) from exc
     except BaseException:  # Ctrl-C, a deadline: drained as well
         _drain(ctx)

@@ -468,6 +468,8 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
         decoded, header, count, damage = getattr(importlib.import_module(module), name)(
             path, max_frames=opts.max_frames, first_frame=opts.first_frame)
         fps, views, size = header.fps, header.views, header.size
+        if header.meta.get("present") is not None:  # the views its source had (the rest decode as zero)
+            present = np.asarray(header.meta["present"], bool)
     else:
         info = video_info(path, count_frames=count_frames)
         grid, fps, count = opts.grid or info.grid, info.fps, info.count

@@ -28,6 +28,7 @@ def write_lf(
     disparity: np.ndarray | None = None,
     overwrite: bool = False,
     image_ext: str = ".png",
+    present: np.ndarray | None = None,
 ) -> Path:
     """Writes a light field. The format follows ``path``:
 
@@ -39,7 +40,8 @@ def write_lf(
     * anything else: a folder of ``R_C.png`` views (0-based); a video ``(T, ...)`` becomes
       one sub-folder per frame, ``frame_000000/`` ….
 
-    An existing file or non-empty folder is an error unless ``overwrite=True``.
+    An existing file or non-empty folder is an error unless ``overwrite=True``. ``present``:
+    ``(U, V)`` mask of the views that exist; a folder gets images of those only.
     """
     path = Path(path)
     lf = np.asarray(lf)
@@ -76,9 +78,9 @@ def write_lf(
         path.mkdir(parents=True, exist_ok=True)
         if lf.ndim == 6:
             for t, frame in enumerate(lf):
-                _write_views(path / f"frame_{t:06d}", frame, image_ext)
+                _write_views(path / f"frame_{t:06d}", frame, image_ext, present)
         else:
-            _write_views(path, lf, image_ext)
+            _write_views(path, lf, image_ext, present)
     return path
 
 
@@ -131,6 +133,9 @@ class NpyWriter:
         except OSError as exc:
             self._tmp.unlink(missing_ok=True)
             raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+        except BaseException:  # Ctrl-C / SIGTERM while finalising: no temporary file left
+            self._tmp.unlink(missing_ok=True)
+            raise
 
     def abort(self) -> None:
         """Discards what was written."""
@@ -155,11 +160,13 @@ class FrameWriter:
             ones counting on: a range of a video keeps its source's frame numbers.
         disparity: a ``.npz``'s ground-truth disparity (:class:`NpzWriter`); refused for the
             formats that hold none.
+        present: ``(U, V)`` mask of the views that exist; a folder gets images of those only
+            (the arrays and videos hold every view, the missing ones as the frames give them).
     """
 
     def __init__(self, path: str | os.PathLike, count: int | None = None, *, fps: float = 30.0, lossless: bool = True,
                  overwrite: bool = False, image_ext: str = ".png", first_index: int = 0,
-                 disparity: np.ndarray | None = None) -> None:
+                 disparity: np.ndarray | None = None, present: np.ndarray | None = None) -> None:
         self.path = Path(path)
         self._ext = self.path.suffix.lower()
         if self._ext in IMAGE_EXTS or self._ext in NOT_LF_EXTS:
@@ -175,6 +182,7 @@ class FrameWriter:
         self._video = None
         self._made_folder = False
         self._first_index = int(first_index)
+        self._present = None if present is None else np.asarray(present, bool)
         self.frames = 0
 
     def write(self, lf: np.ndarray) -> None:
@@ -193,7 +201,7 @@ class FrameWriter:
             if not self.path.exists():
                 self.path.mkdir(parents=True)
                 self._made_folder = True
-            _write_views(self.path / f"frame_{self._first_index + self.frames:06d}", lf, self._image_ext)
+            _write_views(self.path / f"frame_{self._first_index + self.frames:06d}", lf, self._image_ext, self._present)
         self.frames += 1
 
     def close(self, partial: bool = False) -> None:
@@ -303,6 +311,9 @@ class NpzWriter:
         except OSError as exc:
             tmp.unlink(missing_ok=True)
             raise LFFileError(f"{self.path}: cannot write ({exc.strerror or exc})") from exc
+        except BaseException:  # Ctrl-C / SIGTERM while deflating: no temporary file left
+            tmp.unlink(missing_ok=True)
+            raise
         finally:
             self._raw.unlink(missing_ok=True)
 
@@ -332,11 +343,14 @@ def _truncate_npy(path: Path, frames: int) -> None:
         fh.truncate(data_start + frames * int(np.prod(shape[1:], dtype=np.int64)) * dtype.itemsize)
 
 
-def _write_views(folder: Path, lf: np.ndarray, image_ext: str) -> None:
+def _write_views(folder: Path, lf: np.ndarray, image_ext: str, present: np.ndarray | None = None) -> None:
+    """One image per view; views ``present`` marks missing are not written (a folder can
+    say they are absent, as the source did)."""
     folder.mkdir(parents=True, exist_ok=True)
     for u in range(lf.shape[0]):
         for v in range(lf.shape[1]):
-            write_image(folder / f"{u}_{v}{image_ext}", lf[u, v])
+            if present is None or present[u, v]:
+                write_image(folder / f"{u}_{v}{image_ext}", lf[u, v])
 
 
 def _npy_bytes(arr: np.ndarray) -> bytes:

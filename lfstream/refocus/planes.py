@@ -25,17 +25,24 @@ def resolve_slopes(
         s = np.asarray(list(slopes), dtype=np.float64).reshape(-1)
         if s.size == 0 or not np.isfinite(s).all():
             raise LFValueError(f"slopes: need at least one finite value, got {list(slopes)!r}")
-        return s
+        return check_slopes(s)
     s = slopes_from_alphas(SEED_ALPHAS if alphas is None else alphas)
     if s.size == 0:
         raise LFValueError("alphas: need at least one value")
-    return s
+    return check_slopes(s)
+
+
+#: The most focal planes one stack may have (each is a full view in memory and a file).
+MAX_PLANES = 256
 
 
 def slope_range(lo: float, hi: float, count: int) -> np.ndarray:
-    """``count`` evenly spaced slopes from ``lo`` to ``hi`` (a focus range in disparity units)."""
+    """``count`` evenly spaced slopes from ``lo`` to ``hi`` (a focus range in disparity units),
+    at most :data:`MAX_PLANES`."""
     if count < 1 or not (math.isfinite(lo) and math.isfinite(hi)):
         raise LFValueError(f"slope range needs finite ends and count >= 1, got {lo}, {hi}, {count}")
+    if count > MAX_PLANES:
+        raise LFValueError(f"slope range: {count:g} planes; at most {MAX_PLANES}")
     return np.linspace(lo, hi, int(count))
 
 
@@ -46,6 +53,8 @@ def check_slopes(slopes: Sequence[float] | np.ndarray) -> np.ndarray:
     s = np.asarray(slopes, np.float64).reshape(-1)
     if s.size == 0 or not np.isfinite(s).all():
         raise LFValueError("slopes: need at least one finite value")
+    if s.size > MAX_PLANES:
+        raise LFValueError(f"slopes: {s.size} planes; at most {MAX_PLANES}")
     return s
 
 

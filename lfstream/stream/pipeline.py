@@ -70,6 +70,13 @@ STAGE_NAMES = ("producer", "encoder", "decoder", "refocus", "sink", "metrics")
 STOP_GRACE_S = 10.0
 
 
+def _run_then_set(run: Callable[[], None], done: threading.Event) -> None:
+    try:
+        run()
+    finally:
+        done.set()
+
+
 class Pipeline:
     """Runs the stages of one stream; see the module docstring.
 
@@ -112,6 +119,9 @@ class Pipeline:
         self.present = present
         self.prepare = prepare
         self._prepare_stop = threading.Event()
+        # set when the preparation ends: waited on instead of Thread.join, which a Ctrl-C
+        # interrupting it can leave reporting a live thread as stopped
+        self._prepared = threading.Event()
         self.control = RunControl()
         self.stats = {name: StageStats(name) for name in STAGE_NAMES}
         self.interrupted = False
@@ -124,6 +134,8 @@ class Pipeline:
             self.prepare(self._prepare_stop)
         except Exception:  # noqa: BLE001 - see the docstring
             pass
+        finally:
+            self._prepared.set()
 
     def stop(self) -> None:
         """Stops every stage (Ctrl-C); the run then reports ``interrupted``."""
@@ -172,12 +184,12 @@ class Pipeline:
             except Exception:  # noqa: BLE001 - the warm-up only loads kernels: whatever failed here
                 pass  # fails again in its stage, which reports it with the stage and frame
             if preparing is not None:
-                while preparing.is_alive():  # in slices: Ctrl-C reaches this thread meanwhile
-                    preparing.join(0.2)
+                while not self._prepared.wait(0.2):  # in slices: Ctrl-C reaches this thread meanwhile
+                    pass
         finally:
-            if preparing is not None and preparing.is_alive():  # Ctrl-C: the source stops and cleans up
+            if preparing is not None and not self._prepared.is_set():  # Ctrl-C: the source stops and cleans up
                 self._prepare_stop.set()
-                preparing.join()
+                self._prepared.wait()
         t_start = time.perf_counter()
         send_channel, recv_channel = self._channels()
         qs = cfg.queue_size
@@ -200,14 +212,18 @@ class Pipeline:
             if want_metrics:
                 metrics = MetricsStage(ctl, self.stats["metrics"], self.queues["metrics"], originals, cfg, self.present)
                 stages.append(metrics)
-        threads = [threading.Thread(target=s.run, name=s.name, daemon=True) for s in stages]
+        # each stage sets its event when it ends: waited on instead of Thread.join, which a
+        # Ctrl-C interrupting it can leave reporting a live thread as stopped
+        done = [threading.Event() for _ in stages]
+        threads = [threading.Thread(target=_run_then_set, args=(s.run, d), name=s.name, daemon=True)
+                   for s, d in zip(stages, done)]
         for t in threads:
             t.start()
         last = 0.0
         try:
-            while any(t.is_alive() for t in threads):
-                for t in threads:
-                    t.join(timeout=0.05)
+            while not all(d.is_set() for d in done):
+                for d in done:
+                    d.wait(timeout=0.05)
                 if self.progress is not None and time.perf_counter() - last > 0.5:
                     last = time.perf_counter()
                     self.progress(self.status_line(last - t_start))
@@ -218,8 +234,8 @@ class Pipeline:
             # interpreter exits aborts the process ("terminate called without an active
             # exception") and leaves files unfinished
             deadline = time.perf_counter() + STOP_GRACE_S
-            for t in threads:
-                t.join(timeout=max(0.0, deadline - time.perf_counter()))
+            for d in done:
+                d.wait(timeout=max(0.0, deadline - time.perf_counter()))
         wall = time.perf_counter() - t_start
         if ctl.error is not None:
             raise ctl.error

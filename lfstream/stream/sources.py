@@ -14,7 +14,7 @@ from lfstream.errors import LFValueError
 from lfstream.io.readers import ReadOptions, open_lf_frames
 
 #: Bump when the renderer's output changes, so stale cached clips are not reused.
-BUILTIN_CLIP_VERSION = 1
+BUILTIN_CLIP_VERSION = 2
 #: The longest built-in clip ``lfstream stream`` renders ahead, during its warm-up (about 0.4
 #: s a 7x7x375x540 frame: 48 frames in the shadow of a fresh install's ~30 s of compiling);
 #: a longer one renders as it streams on its first run, its frames flowing from the start.
@@ -37,29 +37,41 @@ def cache_dir() -> Path | None:
         return None
 
 
+def _layout_frames(frames: int) -> int:
+    """The clip length the scene is laid out for: every clip up to :data:`PRERENDER_MAX_FRAMES`
+    frames is the start of that one, so one cache file serves them all."""
+    return max(frames, PRERENDER_MAX_FRAMES)
+
+
 def _clip_config(frames: int, views: int, size: tuple[int, int], seed: int):
     from lfstream.synth import SynthConfig
 
     return SynthConfig(frames=frames, views=views, size=size, layers=4, motion=1.0, camera_pan=0.4,
-                       noise=1.5, vignetting=0.2, seed=seed)
+                       noise=1.5, vignetting=0.2, seed=seed, travel_frames=_layout_frames(frames))
 
 
 def _clip_cache(frames: int, views: int, size: tuple[int, int], seed: int) -> Path | None:
-    """The cache file of the built-in clip with these parameters (``None``: no cache folder)."""
+    """The cache file of the built-in clip with these parameters (``None``: no cache folder):
+    one file for every length up to :data:`PRERENDER_MAX_FRAMES` (it holds the longest
+    rendered so far), one per length beyond."""
     folder = cache_dir()
+    layout = _layout_frames(frames)
     return None if folder is None else folder / (
-        f"builtin-v{BUILTIN_CLIP_VERSION}-{frames}x{views}x{views}x{size[0]}x{size[1]}-seed{seed}.npy")
+        f"builtin-v{BUILTIN_CLIP_VERSION}-layout{layout}x{views}x{views}x{size[0]}x{size[1]}-seed{seed}.npy")
 
 
 def _cached_clip(path: Path | None, shape: tuple[int, ...]) -> np.ndarray | None:
-    """The cached clip at ``path`` memory-mapped read-only, where it is there and whole."""
+    """The first ``shape[0]`` frames of the cached clip at ``path``, memory-mapped read-only,
+    where it is there, whole and at least that long."""
     if path is None or not path.exists():
         return None
     try:
         clip = np.load(path, mmap_mode="r")
     except (OSError, ValueError):
         return None
-    return clip if clip.shape == shape and clip.dtype == np.uint8 else None
+    if clip.dtype != np.uint8 or clip.ndim != len(shape) or clip.shape[1:] != shape[1:] or len(clip) < shape[0]:
+        return None
+    return clip[: shape[0]]
 
 
 def _fits_on_disk(folder: Path, nbytes: int) -> bool:
@@ -106,10 +118,10 @@ def _render_clip(frames: int, views: int, size: tuple[int, int], seed: int, path
             # the cache is a convenience: a folder that went away meanwhile (a test's temporary
             # cache removed before this generator was collected) must not raise from here
             try:
-                if done == frames:
-                    os.replace(tmp, path)  # complete: later runs read it
+                if done == frames and _cached_clip(path, shape) is None:
+                    os.replace(tmp, path)  # complete, and longer than what is there: later runs read it
                 else:
-                    tmp.unlink(missing_ok=True)  # a stream stopped early leaves no partial cache
+                    tmp.unlink(missing_ok=True)  # stopped early (no partial cache), or not needed
             except OSError:
                 pass
 

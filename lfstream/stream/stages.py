@@ -17,7 +17,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from lfstream.codec.bitstream import Packet
+from lfstream.codec.bitstream import Packet, with_present
 from lfstream.codec.decoder import DecodedFrame, Decoder
 from lfstream.codec.encoder import Encoder, with_default_hance_map
 from lfstream.codec.rate import choose_configuration, choose_default, uses_default_choice
@@ -193,6 +193,14 @@ class ProducerStage(Stage):
         except Exception as exc:
             self.control.fail(self.name, seq, exc)
         finally:
+            # a generator stopped early cleans up now (a cache file it was filling), not
+            # whenever it happens to be collected
+            close = getattr(it, "close", None) if "it" in locals() else None
+            if close is not None:
+                try:
+                    close()
+                except Exception:  # noqa: BLE001 - the stream's own outcome stands
+                    pass
             self.control.put_end(self.q_out)
 
 
@@ -234,7 +242,8 @@ class EncoderStage(ConsumerStage):
                 first = with_default_hance_map(self.encoder, first, lf, self.present)
         pixels = int(np.prod(lf.shape[:4]))
         if not self.started:
-            self.channel.send_header(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]), self.config.fps))
+            self.channel.send_header(with_present(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]),
+                                                                      self.config.fps), self.present))
             self.started = True
         elif self.config.bpp is not None and self.rate.frame_bpp:
             # later frames cost less than the key frame rate control measured: follow the budget

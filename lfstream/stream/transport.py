@@ -3,7 +3,10 @@
 All three carry the same ``.lfs`` header and packets (:mod:`lfstream.bitstream`). Over
 TCP each message is framed as ``tag (4 bytes) | length (uint32, big-endian) | payload``
 with tags ``LFSH`` (the stream header), ``LFSP`` (one packet) and ``LFSE`` (end of
-stream). The receiver checks every length against :class:`Limits` before reading the
+stream). A connection opens with a handshake: the sender's ``LFHI`` (JSON: the protocol
+version and lfstream's), answered by the receiver's ``LFOK`` or ``LFNO`` (JSON with the
+reason), so a sender knows it reached an lfstream receiver that can read it before it sends
+anything, and fails in one line otherwise. The receiver checks every length against :class:`Limits` before reading the
 payload, every packet's CRC, and the sequence numbers: a lost, duplicated, reordered or
 corrupt packet is counted and skipped, never decoded.
 
@@ -40,6 +43,9 @@ from lfstream.io._fs import temp_sibling
 
 _FRAME = struct.Struct(">4sI")
 TAG_HEADER, TAG_PACKET, TAG_END = b"LFSH", b"LFSP", b"LFSE"
+TAG_HELLO, TAG_WELCOME, TAG_REFUSE = b"LFHI", b"LFOK", b"LFNO"
+#: The TCP protocol's version: a receiver answers a sender of the same version only.
+PROTOCOL = 1
 _POLL_S = 0.1
 
 
@@ -312,6 +318,36 @@ class TcpSender:
         self._sock.settimeout(timeout_s)
         self._addr = f"{host}:{port}"
         self._version = 1  # until send_header
+        try:
+            self._handshake(timeout_s)
+        except BaseException:
+            self._sock.close()
+            raise
+
+    def _handshake(self, timeout_s: float) -> None:
+        """Says hello and waits for the receiver's answer: anything but an lfstream receiver
+        of this protocol fails here, before a frame is encoded."""
+        import json
+
+        from lfstream import __version__
+
+        self._send(TAG_HELLO, json.dumps({"protocol": PROTOCOL, "lfstream": __version__}).encode())
+        not_lfstream = f"{self._addr}: not an lfstream receiver (start one with lfstream serve)"
+        try:
+            head = _recv_exact(self._sock, _FRAME.size)
+            if len(head) < _FRAME.size:
+                raise TransportError(f"{not_lfstream}: it closed the connection")
+            tag, n = _FRAME.unpack(head)
+            if tag not in (TAG_WELCOME, TAG_REFUSE) or n > 1 << 16:
+                raise TransportError(f"{not_lfstream}: it answered {head[:4]!r}")
+            answer = json.loads(_recv_exact(self._sock, n) or b"{}")
+        except TimeoutError:
+            raise TransportError(f"{not_lfstream}: no answer within {timeout_s:.0f} s") from None
+        except (OSError, ValueError) as exc:
+            raise TransportError(f"{not_lfstream} ({exc})") from exc
+        if tag == TAG_REFUSE:
+            raise TransportError(f"{self._addr}: the receiver refused the stream: {answer.get('reason', 'no reason')}")
+        self.receiver_version = answer.get("lfstream")
 
     def _send(self, tag: bytes, payload: bytes) -> None:
         try:
@@ -334,6 +370,10 @@ class TcpSender:
             pass
         finally:
             self._sock.close()
+
+
+def _frame(tag: bytes, payload: bytes) -> bytes:
+    return _FRAME.pack(tag, len(payload)) + payload
 
 
 def _recv_exact(sock: socket.socket, n: int) -> bytes:
@@ -362,6 +402,41 @@ class TcpReceiver:
         self._conn: socket.socket | None = None
         self._header: StreamHeader | None = None
         self.stats = ReceiveStats()
+        # accepted and greeted on a thread from the start, so a sender's handshake is answered
+        # while this end still loads its kernels
+        self._greeted = threading.Event()
+        self._greet_stop = threading.Event()
+        self._greet_error: BaseException | None = None
+        self._greeter = threading.Thread(target=self._greet, name="lfstream-greeter", daemon=True)
+        self._greeter.start()
+
+    def _greet(self) -> None:
+        import json
+
+        from lfstream import __version__
+
+        try:
+            conn = self._accept(self._greet_stop)
+            self._conn = conn
+            head = _recv_exact(conn, _FRAME.size)
+            if len(head) < _FRAME.size:
+                raise TransportError("the sender closed the connection before its handshake")
+            tag, n = _FRAME.unpack(head)
+            if tag != TAG_HELLO or n > 1 << 16:
+                raise TransportError(f"message tag {head[:4]!r} before a handshake: not an lfstream sender")
+            try:
+                hello = json.loads(_recv_exact(conn, n) or b"{}")
+            except ValueError:
+                hello = {}
+            if hello.get("protocol") != PROTOCOL:
+                reason = f"protocol {hello.get('protocol')!r}; this receiver (lfstream {__version__}) speaks {PROTOCOL}"
+                conn.sendall(_frame(TAG_REFUSE, json.dumps({"reason": reason}).encode()))
+                raise TransportError(f"a sender of lfstream {hello.get('lfstream', '?')} refused: {reason}")
+            conn.sendall(_frame(TAG_WELCOME, json.dumps({"protocol": PROTOCOL, "lfstream": __version__}).encode()))
+        except BaseException as exc:  # noqa: BLE001 - reported by header(), on the stage's thread
+            self._greet_error = exc
+        finally:
+            self._greeted.set()
 
     def _accept(self, stop) -> socket.socket:
         deadline = time.monotonic() + self._timeout
@@ -405,7 +480,11 @@ class TcpReceiver:
             raise TransportError(f"receive failed ({exc.strerror or exc})") from exc
 
     def header(self, stop: threading.Event | None = None) -> StreamHeader:
-        self._conn = self._accept(stop)
+        while not self._greeted.wait(_POLL_S):
+            if stop is not None and stop.is_set():
+                self._greet_stop.set()
+        if self._greet_error is not None:
+            raise self._greet_error
         tag, payload = self._message()
         if tag != TAG_HEADER:
             raise TransportError("the sender did not start with a stream header")
@@ -439,6 +518,8 @@ class TcpReceiver:
             self.close()
 
     def close(self) -> None:
+        self._greet_stop.set()
+        self._greeted.wait(1.0)
         if self._conn is not None:
             self._conn.close()
             self._conn = None
@@ -468,4 +549,5 @@ class LazyTcpSender:
 
 __all__ = ["Sender", "Receiver", "in_order", "LazyTcpSender", "InprocChannel", "FileChannel", "TcpSender", "TcpReceiver",
            "ReceiveStats", "SequenceFilter", "TransportError", "StoppedError", "parse_address", "put_until_stopped",
-           "get_until_stopped", "TAG_HEADER", "TAG_PACKET", "TAG_END"]
+           "get_until_stopped", "TAG_HEADER", "TAG_PACKET", "TAG_END", "TAG_HELLO", "TAG_WELCOME", "TAG_REFUSE",
+           "PROTOCOL"]

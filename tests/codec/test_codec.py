@@ -401,7 +401,8 @@ def test_decoding_from_a_later_frame_gives_that_frames_bytes(options, tmp_path, 
     assert main(["decode", str(tmp_path / "a.lfs"), "-o", str(tmp_path / "part.npy"), "--first-frame", "4",
                  "--max-frames", "2", "--json", "--disparity-out", str(tmp_path / "disp")]) == 0
     assert json.loads(capsys.readouterr().out) | {"decode_s": 0} == {
-        "frames": 2, "first_frame": 4, "decode_s": 0, "output": str(tmp_path / "part.npy")}
+        "frames": 2, "first_frame": 4, "decode_s": 0, "output": str(tmp_path / "part.npy"), "missing_views": [],
+        "synthesized_views": []}
     np.testing.assert_array_equal(np.load(tmp_path / "part.npy"), whole[4:6])
     # the maps keep the stream's frame numbers
     assert sorted(p.name for p in (tmp_path / "disp").iterdir()) == ["frame_000004.pfm", "frame_000005.pfm"]

@@ -126,7 +126,8 @@ def test_a_stream_under_a_budget_lands_on_it_though_later_frames_cost_less(monke
     with monkeypatch.context() as m:  # the first frame's choice kept, as before the follower
         m.setattr(rate, "FOLLOW_MAX_STEP", 0)
         kept = run()
-    assert kept["bpp"] < 0.85 * target  # the later frames' deltas: 20-30 % under
+    # the later frames' deltas: well under the budget (about 15 % on this clip) without the follower
+    assert kept["bpp"] < 0.9 * target and kept["bpp"] < s["bpp"]
 
 
 def test_the_default_codes_the_views_where_warping_cannot_predict_them(unpredictable):
@@ -204,7 +205,7 @@ def test_cli_encode_reports_the_defaults_check(unpredictable, tmp_path, capsys):
     assert open(tmp_path / "rig.lfs", "rb").read() == lfstream.encode(unpredictable)
     assert main(["encode", str(src), "-o", str(tmp_path / "fast.lfs"), "--preset", "fast", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["residual"] is None and "prediction_db" not in out
+    assert out["residual"] is None and out["prediction_db"] is None
 
 
 def test_the_defaults_centre_coding_follows_the_number_of_views():

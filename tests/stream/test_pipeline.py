@@ -22,7 +22,7 @@ from lfstream.io import iter_video_frames
 from lfstream.io._fs import prepare_output_dir
 from lfstream.stream import Pipeline, PipelineError, StreamConfig, synthetic_source
 from lfstream.stream.pipeline import WARMUP_STATUS
-from lfstream.stream.transport import TAG_END, TAG_HEADER, TAG_PACKET, TcpReceiver
+from lfstream.stream.transport import PROTOCOL, TAG_END, TAG_HEADER, TAG_HELLO, TAG_PACKET, TAG_WELCOME, TcpReceiver
 
 SMALL = dict(frames=4, views=5, size=(48, 64))
 
@@ -97,6 +97,10 @@ def test_tcp_faults_are_detected_and_skipped(tmp_path):
     from lfstream.codec.bitstream import pack_header
 
     with socket.create_connection(receiver.address, timeout=10) as s:  # a faulty "proxy" sender
+        hello = json.dumps({"protocol": PROTOCOL}).encode()
+        s.sendall(struct.pack(">4sI", TAG_HELLO, len(hello)) + hello)
+        assert s.recv(4) == TAG_WELCOME
+        s.recv(1 << 16)
         s.sendall(struct.pack(">4sI", TAG_HEADER, len(pack_header(header))) + pack_header(header))
         for p in plan:
             s.sendall(struct.pack(">4sI", TAG_PACKET, len(p)) + p)
