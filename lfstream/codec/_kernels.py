@@ -95,7 +95,7 @@ def pack_lanes(img, ch0, n_ch, packed):  # pragma: no cover - compiled
 
     A row's interior is packed one channel at a time (loops that vectorise; a clamped
     loop over every padded pixel took 6 ns a pixel), then its two border pixels copied; rows
-    in parallel (0.47 -> 0.25 ms a 512 x 512 view on two threads).
+    in parallel.
 
     Args:
         img: (H, W, C) uint8; packed: ((H + 2) * (W + 2),) uint64, overwritten.
@@ -259,8 +259,7 @@ def _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs):  # pragma: n
     The taps are gathered into ``gathered`` (4, W) uint64 scratch by a loop of loads alone,
     then blended by a loop over contiguous rows: LLVM does not vectorise gathers for this
     CPU, so with the loads and the arithmetic in one loop both stayed scalar; apart, the
-    arithmetic runs eight pixels a vector instruction (a 375 x 540 view's four-tap samples
-    0.375 -> 0.265 ms, one thread). Integer arithmetic: the same values in any order.
+    arithmetic runs eight pixels a vector instruction. Integer arithmetic: the same values in any order.
     """
     w = idx.shape[0]
     f = np.uint64(_FRAC)
@@ -295,9 +294,7 @@ def _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs):  # pragma: n
 def _row_sample3(packed, stride, idx, fxs, fys, taps, gathered, accs, dst, y):  # pragma: no cover - compiled
     """Bilinear samples of one view row of three channels, rounded to uint8 into row ``y``
     of ``dst`` (H, W * 3); ``gathered`` (4, W) and ``accs`` (W,) uint64 scratch
-    (:func:`_row_accs`), whose lanes a second loop unpacks (inside the sampling loop, as
-    before, the unpacking stayed scalar too: a 375 x 540 view 0.53 -> 0.45 ms with four
-    taps, one thread)."""
+    (:func:`_row_accs`), whose lanes a second loop unpacks."""
     _row_accs(packed, stride, idx, fxs, fys, taps, gathered, accs)
     m = np.uint64(255)
     half = np.uint64(_HALF_LANES)
@@ -369,8 +366,7 @@ def _row_centre(packed, start, c, ch0, n_ch, has_gains, gcols, top, bottom, wa, 
     whatever the disparity, so the bilinear samples are the pixels bit for bit (``2**13 *
     value`` in each lane) and are read straight from the packed row that starts at
     ``start``, with the gains applied as for any view: the same bytes as sampling, in a loop
-    that vectorises (the sampling loop made the centre view cost as much as a row view's
-    two taps: 0.7-1.2 ms a 375 x 540 view on one thread)."""
+    that vectorises."""
     w = dst.shape[1] // c
     m = np.uint64(255)
     if has_gains:
@@ -743,7 +739,6 @@ def _block_mean_row(grey, i, scale, acc, out_row):  # pragma: no cover - compile
     if scale == 2 and y1 - 2 * i == 2 and ws == w // 2:
         # the encoder's working scale: two rows summed in one pass and pairs of columns
         # (a constant stride the loop vectorises), the same sums and roundings as below
-        # (13 views of 375 x 540 on one thread: 0.61 -> 0.25 ms)
         r0, r1 = grey[2 * i], grey[2 * i + 1]
         for x in range(w):
             acc[x] = np.int32(r0[x]) + np.int32(r1[x])
@@ -1044,10 +1039,7 @@ def _i420_residual_row(dst_row, flat, y, height, width, offset, store, vcb, vcr,
     2x2 means (OpenCV's INTER_LINEAR resize): at 2x the taps are always 3/4 and 1/4, so the
     whole interpolation is integer: (9a + 3b + 3c + d + 8) / 16. The row's chroma is
     up-sampled first, in loops over contiguous arrays that LLVM vectorises; then one loop
-    converts each pixel and stores (or adds) it in place, clipping with min/max (measured on
-    48 views of 375 x 540, one thread: 9.4 -> 6.4 ms added, 6.9 -> 4.5 ms stored, against
-    three colour rows converted apart and interleaved by a second loop, the same bytes; and
-    54 -> 16 ms before that, when the column taps were chosen per pixel inside the loop).
+    converts each pixel and stores (or adds) it in place, clipping with min/max.
 
     Args:
         dst_row: ``(W * 3,)`` uint8 output row. flat: PyAV's (3H/2, W) yuv420p layout

@@ -457,7 +457,7 @@ class Decoder:
         if refines and (self._view_maps is None or self._view_maps.shape[0] < len(packets)):
             # the per-view maps' array, kept from batch to batch: fresh, its 40 MB a 7x7x375x540
             # frame were 6-12 ms of page faults a frame, and tens where the kernel compacted
-            # huge pages for them (bench/throughput.py's Depth-Net decode: 43-83 ms)
+            # huge pages for them
             self._view_maps = np.empty((len(packets), *self.header.views, h, w), np.float32)
         view_maps = predict_view_disparities(centres, self._depth_net, self.header.views, stacked, self.device, axes,
                                              out=self._view_maps if refines else None, precision=self.precision)

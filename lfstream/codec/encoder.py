@@ -33,9 +33,9 @@ from lfstream.lightfield import centre_view, check_finite, check_lf, check_unit_
 ENCODER_NAME = "lfstream-jpeg-centre"
 
 #: Named speed/size trade-offs of the centre view's coding (bench/rd.py measures them):
-#: ``fast`` is the seed's JPEG (under 1 ms a view); ``balanced`` an AV1 key frame at SVT-AV1
-#: preset 12 (20-30 ms, 35-75 % fewer centre bytes at equal PSNR on the shared samples);
-#: ``best`` SVT-AV1 preset 8 (35-55 ms, a further 0.7-1.4 dB at equal bytes).
+#: ``fast`` is the seed's JPEG; ``balanced`` an AV1 key frame at SVT-AV1
+#: preset 12;
+#: ``best`` SVT-AV1 preset 8.
 PRESETS: dict[str, CentreCoding] = {
     "fast": CentreCoding("jpeg"),
     "balanced": CentreCoding("av1", speed=12),
@@ -73,8 +73,7 @@ class Encoder:
         preset: the centre view's coding (:data:`PRESETS`: ``fast`` JPEG, ``balanced`` and
             ``best`` AV1).
         residual: quality (1..100) of the residual layer, ``None`` for none. The encoder
-            then runs the decoder's prediction on every frame (it costs a decode and an AV1
-            sequence encode: 150-600 ms a 7x7x375x540 frame).
+            then runs the decoder's prediction on every frame.
         residual_mode: what the residual codes (:data:`lfstream.codec.residual.RESIDUAL_MODES`):
             ``prediction`` (the prediction's error), ``views`` (the views themselves, for
             scenes warping cannot predict; no prediction is run and no gain maps are sent,
@@ -85,9 +84,7 @@ class Encoder:
             not two. Rate control always makes that choice.
         post_filter: measure which of the decoder's JPEG post-filters
             (:data:`lfstream.codec.jpeg.POST_FILTERS`, and a black floor) suits the centre
-            view and name it in the JPEG (:func:`lfstream.codec.jpeg.choose_post_filter`;
-            about 3 ms a 375 x 540 view on the first frame and every hint key frame after it,
-            nothing on the frames between); ``False`` leaves every frame at the default
+            view and name it in the JPEG; ``False`` leaves every frame at the default
             filter, the bytes of earlier versions.
         hance_map: send a JPEG-Hance strength map with the JPEG centre view
             (:mod:`lfstream.codec.hance`): measured on the first frame and every hint key
@@ -249,7 +246,7 @@ class Encoder:
             if self.depth_hint:
                 hint_job = self._hints.start_encode(frame, seq, present)
         elif self.depth_hint:
-            # the centre view's coding (and the post-filter choice, ~3 ms on key frames)
+            # the centre view's coding
             # does not depend on the hint: overlapped with it on a worker thread (measured on
             # lytro_bikes, 2 cores: a single-frame encode 24.8 -> 20.2 ms); same bytes
             centre_job = beside(lambda: self._code_centre(centre))
@@ -285,7 +282,6 @@ class Encoder:
                                             hance="off")
         if self._hance_age is not None and self._hance_age < self.hint_options.key_interval:
             # a frame between measurements: its hint and gains only, for the deltas after it
-            # (a full decode of each, 14 of the 22 ms a 7x7x375x540 frame took, was not needed)
             self._hance_reference.follow(packet)
         else:
             from lfstream.models.jpeg_hance import restore_images
@@ -327,10 +323,10 @@ class Encoder:
                            gains: np.ndarray | None = None, payload: bytes | None = None) -> Packet:
         """Frame 0's ``packet`` with its key hint sent at twice the scale, from the same sweep,
         and its shading gains, where it has any, measured again against that hint (a frame
-        without shading against the finer hint keeps none: 2.5 ms saved on a 7x7x375x540
-        frame; ``gains``: that measurement where the caller made it,
-        :func:`lfstream.codec.shading.measure_gains` against :meth:`coarser_first_hint`;
-        ``payload``: :func:`lfstream.codec.hint.key_payload` of that hint, likewise);
+        without shading against the finer hint keeps none; ``gains``: that measurement where the
+        caller made it, :func:`lfstream.codec.shading.measure_gains` against
+        :meth:`coarser_first_hint`; ``payload``: :func:`lfstream.codec.hint.key_payload` of that
+        hint, likewise);
         the frames after it follow at that scale (:attr:`hint_options`, which the header
         records). The packet is then what an encoder with that ``hint_scale`` makes of the
         frame (byte for byte on the shared samples and the synthetic clip)."""
@@ -450,8 +446,7 @@ def encode(
     preset is used as it is. ``residual``: quality 1..100 of the residual layer (:mod:`lfstream.codec.residual`),
     ``None`` (the default) for none; ``residual_mode``: what it codes (``prediction`` or
     ``views``, :attr:`Encoder.residual_mode`). ``post_filter``: name the decoder's JPEG
-    post-filter the encoder measured best (:attr:`Encoder.post_filter`; ``False``: the
-    default filter, about 3 ms less per key frame). ``device``: where the hint's plane sweep
+    post-filter the encoder measured best. ``device``: where the hint's plane sweep
     runs (:attr:`Encoder.device`; rate control's searches sweep on the CPU). ``hance_map``:
     send a JPEG-Hance strength map with each JPEG centre view (:attr:`Encoder.hance_map`; the
     default's choice of the views themselves, an AV1 sequence, carries none; not with ``bpp``).

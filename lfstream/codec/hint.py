@@ -538,8 +538,7 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
             ``max_disparity``, else a coarse pass finds the scene's range.
         axes: the capture's view axes (a video's first frame); ``None``: detected
             (``options.geometry == "auto"``) or the convention.
-        keep_ring_luma: fill :attr:`HintMap.ring_luma` (0.2 ms a 7x7x375x540 frame; the
-            encoder asks on key hints, where a stream's first frame is checked).
+        keep_ring_luma: fill :attr:`HintMap.ring_luma`.
         keep_coarse: fill :attr:`HintMap.coarse` (block means of the same working map and
             the same median: well under a millisecond).
         device: ``None`` or ``"cpu"``: the sweep on the CPU kernels; ``"cuda"``: the sweep as
@@ -836,8 +835,7 @@ class HintTracker:
 
     def start_encode(self, lf: np.ndarray, seq: int, present: np.ndarray | None = None) -> Future:
         """:meth:`encode`, returning as soon as the hint is known (:attr:`last` is set): the
-        future of its payload, whose entropy coding (a key hint's: 0.4-0.7 ms on a 7x7x375x540
-        frame) runs on a worker thread meanwhile, so the caller can measure what depends on
+        future of its payload, whose entropy coding runs on a worker thread meanwhile, so the caller can measure what depends on
         the hint (the shading gains) beside it. On a worker thread, coded before returning."""
         from lfstream.codec.watchdog import completed, in_background, on_worker_thread
 

@@ -199,7 +199,7 @@ def encode_av1(img: np.ndarray, quality: int, speed: int = 12) -> bytes:
 #: worker threads cost more than they save on one key frame (measured on the 2-core machine,
 #: the decode alone: cotton's and dino's 512 x 512 centres 1.01 -> 0.89 and 1.95 -> 1.70 ms,
 #: seahorse's 500 x 500 0.48 -> 0.34, the synthetic 375 x 540 0.87 -> 0.67), while a
-#: 1080 x 1920 one decodes faster threaded (6.3 against 7.0 ms at quality 50).
+#: 1080 x 1920 one decodes faster threaded.
 AV1_THREADED_MIN_PIXELS = 1 << 20
 
 

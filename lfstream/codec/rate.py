@@ -117,7 +117,7 @@ QUICK_MAX_CENTRE_QUALITY = 90
 QUICK_HINT_SHARE = 0.2
 #: Both searches take the first residual (or views) quality whose stream lands within this
 #: share of the target instead of bracketing the nearest: each probe is an AV1 sequence of
-#: every view (100-250 ms a 7x7x375x540 frame at SVT-AV1 preset 12, 0.5-1 s at 4). Measured:
+#: every view. Measured:
 #: the quick search's probes on synthetic, seahorse, bikes, translucent at 0.04-0.1 bpp 69 ->
 #: 45 for -0.10...0.00 dB; the full search 20-38 % faster on the same scenes at 0.01-0.08 bpp,
 #: -0.07...+0.34 dB.
@@ -187,8 +187,7 @@ def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, prese
             applied to the luma), or ``None``.
         present: ``(U, V)`` mask of the views that exist.
         ring_luma: those block means of the centre and the ring views where the caller has
-            them (:attr:`lfstream.codec.hint.HintMap.ring_luma`: the encoder's sweep read
-            them, and reading the views again took about 2 ms of a 24 ms frame); ``None``:
+            them; ``None``:
             computed here.
         grid_scale: the block size of those means (a divisor of the hint's scale); ``None``:
             the hint's own. A coarser hint is up-sampled bilinearly to them, so hints of two

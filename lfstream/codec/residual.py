@@ -337,8 +337,7 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
 
 def _copy_i420(f, out: np.ndarray) -> None:
     """A decoded yuv420p frame's planes into ``out``, PyAV's ``(3H/2, W)`` layout, with one
-    copy per plane (``to_ndarray`` copies the frame into a new array that then had to be
-    copied again: 2.1 -> 1.4 ms for 48 frames of 376 x 540)."""
+    copy per plane."""
     h, w = f.height, f.width
     shapes = ((h, w), (h // 2, w // 2), (h // 2, w // 2))
     if any(p.line_size < pw or p.buffer_size < ph * p.line_size for p, (ph, pw) in zip(f.planes, shapes)):

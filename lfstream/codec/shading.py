@@ -245,7 +245,7 @@ class GainTracker:
         full = _full_payload(q)
         if len(full) <= len(payload):
             # content moving through the cells can make the delta the larger (measured on a
-            # pan over seahorse: 975 vs 839 B); the full map is then the better key (0.2 ms)
+            # pan over seahorse: 975 vs 839 B); the full map is then the better key
             self._sent, self._since_key = q, 0
             return full
         self._sent = sent
@@ -327,8 +327,7 @@ def apply_gains(lf: np.ndarray, gains: np.ndarray, out: np.ndarray | None = None
     C)`` bilinearly up-sampled, into ``out`` (a new array where ``None``): OpenCV's arithmetic
     for ``cv2.multiply(view, upsample_gain(gain), dtype=CV_8U)`` (INTER_LINEAR's taps and
     float32 passes, the product rounded half to even), done in one parallel kernel
-    (:func:`lfstream.codec._kernels.apply_view_gains`; the synthetic clip's views 11-19 ->
-    1.1 ms on two cores) and so the same on every CPU, where OpenCV's own resize runs IPP's
+    and so the same on every CPU, where OpenCV's own resize runs IPP's
     CPU-specific code (within one level of it, on 0.01-0.03 % of samples here). ``lf`` may
     be a broadcast of one view (the flat decode), which is then read as one.
 

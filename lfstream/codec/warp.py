@@ -460,9 +460,7 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
             each view's map as :func:`lfstream.models.depth_net.view_correction` computes
             them (float32, the same values to the bit), in the same pass: 6 ms a 7x7x375x540
             frame against 5 for the plain maps and 12 more for 49 numpy sums after them.
-        out: a ``(U, V, H, W)`` float32 C-contiguous array to write the maps into (a
-            decoder's, reused from frame to frame: 40 MB of fresh pages a 7x7x375x540 frame
-            otherwise, 6-12 ms to fault in and more where the kernel compacts huge pages).
+        out: a ``(U, V, H, W)`` float32 C-contiguous array to write the maps into.
 
     Shape:
         - output: ``(U, V, H, W)`` float32

@@ -9,8 +9,7 @@ view (nearest pixel, the larger disparity wins), holes given their nearest splat
 neighbour on the background side (the smaller disparity; a row nothing landed on keeps the
 centre map), bilinear sampling in 1/1024-pixel fixed point with the border replicated, the
 per-view gain maps bilinearly up-sampled (OpenCV's INTER_LINEAR taps) and multiplied in.
-On a CUDA device where Triton imports, the same steps run as three fused kernels
-(:mod:`lfstream.codec.warp_triton`: 130 -> 1,710 LF/s of 7x7x375x540 on an H100).
+On a CUDA device where Triton imports, the same steps run as three fused kernels.
 Integer steps are exact; the splat and tap positions round once, as the kernel's fused
 multiply-adds do, so without gains the bytes are the kernel's. In the gain blend not every
 choice of the kernel's compiler is reproduced: about one sample in 10^6 moves by a level
@@ -128,7 +127,7 @@ def _splat_rows(d: torch.Tensor, offsets: np.ndarray, tolerance: float) -> torch
     """The view rows each frame splats (:func:`lfstream.codec.warp.splat_rows`) on the maps'
     device, every frame at once: the same float32 fold bounds as the CPU kernel's, the same
     float64 windows and test (:func:`lfstream.codec.warp._rows_from_bounds`), and no trip to
-    the host (deciding it there frame by frame was 5 ms of a 30-frame call).
+    the host.
 
     Shape:
         - d: ``(B, 1, H, W)`` finite float32; offsets: ``(N, 2)``; output: ``(B, N, H)`` bool

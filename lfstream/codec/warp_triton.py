@@ -4,8 +4,7 @@ the z-tested forward splat into them, their row-wise hole filling, and the per-p
 :func:`lfstream.codec.warp_batched.warp_views_batched` written as torch operations moves
 every intermediate (tap positions, int64 indices, four gathered taps per channel, float64
 gain blends, the splat's scatter and the hole filling's scans) through GPU memory: 130 LF/s
-of 7x7x375x540 on an H100 (2026-11-25, 30 light fields a call; writing the output once at
-the card's ~3 TB/s would take 0.01 ms a light field). With this module: 1,397 LF/s (30 a
+of 7x7x375x540 on an H100. With this module: 1,397 LF/s (30 a
 call), 1,774 (120 a call); without the splat (every view from the centre map) 2,306 and
 2,696 (``bench/batched_warp.py``; the per-pixel kernel alone lifted the torch path to 355).
 Since 2026-11-27 (the splat's rows decided on the device and only those splatted, the

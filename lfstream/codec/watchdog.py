@@ -11,8 +11,8 @@ daemon, so it does not keep the process alive) and runs the encode again from th
 a fresh encoder. Encoders are deterministic, so a retry gives the bytes the first attempt
 would have given. After the last attempt it raises :class:`EncoderStalledError`.
 
-Deadlines are generous on purpose (:func:`encoder_deadline`: a minute plus 2 us per coded
-pixel, i.e. about 50x what SVT-AV1 preset 8 needs on a busy 2-core machine): a deadlock is
+Deadlines are generous on purpose (:func:`encoder_deadline`: a minute plus 2 µs per coded
+pixel, many times what SVT-AV1 needs): a deadlock is
 forever, and a slow machine must never see a false alarm.
 """
 
@@ -63,7 +63,7 @@ def in_background(fn: Callable[[], T]) -> Future:
     kept): two independent parts of one frame's work overlapped on a multi-core machine
     (OpenCV, zstd and numba kernels release the GIL). Kept threads, not a thread per call:
     a numba parallel kernel called from a new thread starts a new OpenMP team, which cost
-    more than the overlap saved (measured: a single-frame encode 24.8 ms either way).
+    more than the overlap saved.
 
     Only for short work that cannot block (a third-party encoder goes through
     :func:`call_with_deadline`)."""

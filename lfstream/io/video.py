@@ -213,8 +213,7 @@ def video_grid_and_fps(path: Path) -> tuple[tuple[int, int] | None, float | None
 def collect_frames(frames: Iterator[np.ndarray], count: int | None, source: Path) -> np.ndarray:
     """The frames of an iterator as one ``(T, ...)`` array. Where ``count`` (what the file
     says it holds) is known, they are written into one array allocated up front: stacking a
-    list copied every frame once more into fresh pages (for 20 mosaics of 7x7x375x540, 41 ms
-    a frame; most of it page faults). Fewer frames than ``count`` give the ones read; more
+    list copied every frame once more into fresh pages. Fewer frames than ``count`` give the ones read; more
     are appended."""
     first = next(frames, None)
     if first is None:
@@ -408,8 +407,8 @@ _RGB_TO_UV = np.array([[-0.1482, -0.2910, 0.4392, 128.0], [0.4392, -0.3678, -0.0
 
 def rgb_to_video_i420(img: np.ndarray, size: tuple[int, int] | None = None) -> np.ndarray:
     """RGB to planar 4:2:0 YCbCr as players expect it (BT.601, limited range: what PyAV's
-    swscale produces for untagged video, luma within one level, chroma within two and 0.3 on
-    average; ~1.7x faster: 0.95 vs 1.6 ms for 376 x 540), padded by edge replication to
+    swscale produces for untagged video, luma within one level, chroma within two), padded
+    by edge replication to
     ``size`` (even). Chroma is the 2 x 2 area mean, as swscale's.
     (:func:`lfstream.codec.intra.rgb_to_i420` is the codec's own full-range conversion,
     which its decoder inverts.)

@@ -23,8 +23,8 @@ Skips (each switchable, each reported in the summary with what it saved and cost
       plane would need one scattered (gathered) sample of the centre per view and pixel,
       13 x 49 per pixel for the default planes of a 7x7 grid (~130 M scalar gathers, over a
       second on the development CPU), where the fused warp gathers once per view and pixel
-      (~80-150 ms for 7x7x375x540) and the separable shift-and-sum then streams the views
-      with vectorised rows (~40-60 ms for 13 planes). Measured parts, not measured directly.
+      and the separable shift-and-sum then streams the views
+      with vectorised rows.
 
 The stages live in :mod:`lfstream.stream.stages`, each owning its statistics; this module
 wires them: channels, queues, threads, and the summary. An error in any stage stops the

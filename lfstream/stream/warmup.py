@@ -192,7 +192,7 @@ def _warm(config: StreamConfig, decode: bool, child: subprocess.Popen | None) ->
     # networks the stream's decoder runs (hance "on", depth "net"; "auto" decides on the
     # warm-up's header, coded by the stream's encoder settings), so that torch's import
     # (0.8 s here) and their first call are not paid by the first frame inside the timed
-    # run (the built-in clip with both: 3.6-4.1 frames/s with them in it, 4.6-5.3 without)
+    # run
     networks = Decoder(header, depth=config.depth, hance=config.hance, device=config.device, preset=config.networks)
     if networks.runs_networks:
         networks.decode_packet(packet)
