@@ -127,6 +127,14 @@ def _psnr_numpy(x: np.ndarray, y: np.ndarray, data_range: float | None):
 def psnr(x, y, data_range: float | None = None):
     """Peak signal-to-noise ratio in dB per image.
 
+    Args:
+        x, y: the images: numpy arrays or torch tensors, uint8 or float.
+        data_range: the value range (default: 255 for uint8, 1 for float).
+
+    Returns:
+        PSNR in dB per image (``inf`` where identical): numpy float64 (a Python float for one image) for numpy
+        inputs, a tensor for tensors.
+
     Shape:
         - x, y: ``(..., H, W, C)``
         - output: ``(...)``
@@ -197,6 +205,14 @@ def ssim(x, y, data_range: float | None = None):
     numpy inputs: a fused kernel (float32 moments, float64 sums; within 1e-6 of float64 on
     8-bit images); torch tensors: float64 on CPU, float32 on GPU.
 
+    Args:
+        x, y: the images: numpy arrays or torch tensors, uint8 or float.
+        data_range: the value range (default: 255 for uint8, 1 for float).
+
+    Returns:
+        SSIM per image: numpy float64 (a Python float for one image) for numpy
+        inputs, a tensor for tensors.
+
     Shape:
         - x, y: ``(..., H, W, C)`` with ``H, W >= 11``
         - output: ``(...)``
@@ -249,6 +265,15 @@ def mpsnr(ref, test, data_range: float | None = None, present=None):
     ``(U, V)`` bool mask of the views that exist in the reference (a light field read with
     missing views); the mean is over those only, never over zero-filled stand-ins.
 
+    Args:
+        ref, test: the light fields: numpy arrays or torch tensors, uint8 or float.
+        data_range: the value range (default: 255 for uint8, 1 for float).
+        present: the views that exist in ``ref``; the mean is over those only.
+
+    Returns:
+        the mean PSNR over the views, dB: numpy float64 (a Python float for one image) for numpy
+        inputs, a tensor for tensors.
+
     Shape:
         - ref, test: ``(*, U, V, H, W, C)``; present: ``(U, V)``
         - output: ``(*)``
@@ -259,6 +284,15 @@ def mpsnr(ref, test, data_range: float | None = None, present=None):
 
 def mssim(ref, test, data_range: float | None = None, present=None):
     """Mean SSIM over the (present) views of a light field (seed Eq. 3.11).
+
+    Args:
+        ref, test: the light fields: numpy arrays or torch tensors, uint8 or float.
+        data_range: the value range (default: 255 for uint8, 1 for float).
+        present: the views that exist in ``ref``; the mean is over those only.
+
+    Returns:
+        the mean SSIM over the views: numpy float64 (a Python float for one image) for numpy
+        inputs, a tensor for tensors.
 
     Shape:
         - ref, test: ``(*, U, V, H, W, C)``; present: ``(U, V)``

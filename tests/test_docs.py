@@ -134,3 +134,23 @@ def test_install_pins_torch_for_this_machine_only():
     runtime_rule = re.search(r"^\$\(RUNTIME\):.*\n((?:\t.*\n)+)", make, re.M).group(1)
     assert demo.strip() == "$(RUNTIME)" and "[" not in runtime_rule  # no extras for the demo
     assert "-c constraints.txt" in make
+
+
+def test_the_public_array_functions_have_google_docstrings():
+    """The Python API's functions that take arrays document Args, Returns and Shape."""
+    import inspect
+
+    import lfstream
+    import lfstream.codec as codec
+    import lfstream.metrics as metrics
+    import lfstream.refocus as refocus
+    import lfstream.testing as testing
+
+    functions = [lfstream.read_lf, lfstream.write_lf, codec.encode, codec.decode, codec.iter_decode,
+                 refocus.focal_stack, refocus.all_in_focus, refocus.shift_and_sum, metrics.psnr, metrics.ssim,
+                 metrics.mpsnr, metrics.mssim, testing.frame_metrics, testing.assert_lf_close]
+    missing = [f"{f.__module__}.{f.__name__}: {section}" for f in functions for section in ("Args:", "Shape:")
+               if section not in (inspect.getdoc(f) or "")]
+    missing += [f"{f.__module__}.{f.__name__}: Returns:" for f in functions
+                if f is not testing.assert_lf_close and "Returns:" not in (inspect.getdoc(f) or "")]
+    assert not missing, missing

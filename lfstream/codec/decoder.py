@@ -493,17 +493,33 @@ def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits 
                 batch: int = 1, deblock: bool = True, out: np.ndarray | None = None,
                 first_frame: int = 0, preset: str = "fast", precision: str = "auto",
                 synthesize_missing: bool = False) -> Iterator[DecodedFrame]:
-    """Decodes a stream frame by frame (networks batched over ``batch`` frames); every
-    complete frame before a damaged packet is yielded, then :class:`BitstreamError` names
-    the damaged frame. ``deblock``, ``preset``, ``precision``: :class:`Decoder`'s. ``out``: a ``(T, U, V, H, W,
-    3)`` uint8 array the ``k``-th frame decoded (``k < T``) goes into
-    (:meth:`Decoder.decode_batch`); later frames get arrays of their own.
+    """Decodes a stream frame by frame, in bounded memory.
 
-    ``first_frame``: the stream's frame to start at; the packets before it are only
-    followed (:meth:`Decoder.follow`: their hints and gain maps read, so that the deltas
-    after them resolve; nothing warped), so the frames decoded are byte for byte those of
-    a decode from the start. ``max_frames`` counts from it. Each frame keeps its stream
-    index as :attr:`DecodedFrame.seq`."""
+    Every complete frame before a damaged packet is yielded, then :class:`BitstreamError`
+    names the damaged frame. The packets before ``first_frame`` are only followed
+    (:meth:`Decoder.follow`: their hints and gain maps read, so that the deltas after them
+    resolve; nothing warped), so the frames decoded are byte for byte those of a decode from
+    the start.
+
+    Args:
+        fh: a binary file object at the start of the stream.
+        depth, occlusion, hance, device, deblock, preset, precision: :class:`Decoder`'s.
+        limits: bounds checked before anything is allocated.
+        max_frames: at most this many frames, counted from ``first_frame``.
+        batch: frames per network batch.
+        out: an array the ``k``-th frame decoded (``k < T``) goes into
+            (:meth:`Decoder.decode_batch`); later frames get arrays of their own.
+        first_frame: the stream's frame to start at.
+        synthesize_missing: keep the prediction of the views the source lacked instead of zeros.
+
+    Returns:
+        An iterator of :class:`DecodedFrame`, each with its stream index as
+        :attr:`DecodedFrame.seq`.
+
+    Shape:
+        - out: ``(T, U, V, H, W, 3)`` uint8
+        - each frame's ``lf``: ``(U, V, H, W, 3)`` uint8; ``disparity``: ``(H, W)`` float32
+    """
     lo, hi = BATCH_RANGE
     if not isinstance(batch, int) or not lo <= batch <= hi:
         raise LFValueError(f"batch: an integer in {lo}..{hi}, got {batch!r}")
@@ -561,20 +577,30 @@ def decode(data: bytes, depth: str = "auto", occlusion: bool = True, limits: Lim
            hance: str = "auto", device: str = "cpu", deblock: bool = True, first_frame: int = 0,
            max_frames: int | None = None, preset: str = "fast", precision: str = "auto",
            synthesize_missing: bool = False) -> np.ndarray:
-    """Decodes ``.lfs`` bytes to ``(T, U, V, H, W, 3)`` uint8 (``deblock``: :attr:`Decoder.deblock`;
-    ``preset``: the networks' weights, :attr:`Decoder.preset`; ``precision``: theirs,
-    :attr:`Decoder.precision`);
-    ``first_frame``, ``max_frames``: a range of the stream's frames (:func:`iter_decode`:
-    the same bytes as those frames of a whole decode).
+    """Decodes ``.lfs`` bytes to every frame's light field.
 
     The frames are decoded into one array sized by the packets counted first
-    (:func:`video_array`), not decoded apart and then stacked: the built-in clip's 12
-    frames of 7x7x375x540 decoded in 15.9 ms a frame instead of 18.5-19.0, with a peak of
-    536 MB instead of 877-1015 (the stack copied every frame into fresh pages).
+    (:func:`video_array`), not decoded apart and then stacked (the stack copied every frame
+    into fresh pages).
+
+    Args:
+        data: the stream.
+        depth, occlusion, hance, device, deblock, preset, precision: :class:`Decoder`'s.
+        limits: bounds checked before anything is allocated.
+        first_frame, max_frames: a range of the stream's frames (:func:`iter_decode`: the
+            same bytes as those frames of a whole decode).
+        synthesize_missing: keep the decoder's prediction of the views the source lacked
+            (the stream's present-view mask) instead of zeros.
+
+    Returns:
+        uint8 light fields, one per decoded frame.
 
     Raises:
         LFStreamError: corrupt, truncated or hostile input (the error names the frame; the
             frames decoded before the damage are in its ``partial`` attribute).
+
+    Shape:
+        - output: ``(T, U, V, H, W, 3)``
     """
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise LFValueError(f"data: expected bytes, got {type(data).__name__}")

@@ -429,30 +429,47 @@ def encode(
     device: str = "cpu",
     hance_map: bool = False,
 ) -> bytes:
-    """Encodes one frame ``(U, V, H, W, 3)`` or a video ``(T, U, V, H, W, 3)`` to ``.lfs`` bytes.
+    """Encodes one light field or an LF video to ``.lfs`` bytes.
 
-    ``present``: the ``(U, V)`` mask of views that exist, for light fields read with missing
-    views (the centre view must exist); the decoder reconstructs all views. ``bpp``: a
-    target size in bits per pixel instead of ``quality`` and ``depth_hint``: rate control
-    (:mod:`lfstream.codec.rate`) picks the quality, whether to send the hint and, unless
-    ``preset`` names one, the preset, and whether and how well to code the residual layer.
-    ``preset``: the centre view's coding (:data:`PRESETS`). ``None`` (the default, with the
-    hint and no residual named): chosen per stream (:func:`lfstream.codec.rate.choose_default`):
-    ``fast``, the seed's JPEG, from 7x7 views up, an AV1 centre with fewer views
-    (:func:`lfstream.codec.rate.default_preset`), and the views coded as one AV1 sequence
-    keyed by the centre view where the first frame shows that warping cannot predict them; with
-    ``hint_options`` not given, the hint at 1/8 of the view instead of 1/4 where the first
-    frame shows it predicts the views as well for the bytes it saves (:func:`lfstream.codec.rate.coarsening_allowance`). A named
-    preset is used as it is. ``residual``: quality 1..100 of the residual layer (:mod:`lfstream.codec.residual`),
-    ``None`` (the default) for none; ``residual_mode``: what it codes (``prediction`` or
-    ``views``, :attr:`Encoder.residual_mode`). ``post_filter``: name the decoder's JPEG
-    post-filter the encoder measured best. ``device``: where the hint's plane sweep
-    runs (:attr:`Encoder.device`; rate control's searches sweep on the CPU). ``hance_map``:
-    send a JPEG-Hance strength map with each JPEG centre view (:attr:`Encoder.hance_map`; the
-    default's choice of the views themselves, an AV1 sequence, carries none; not with ``bpp``).
+    With no ``preset``, ``bpp`` or ``residual`` named, the coding is chosen per stream
+    (:func:`lfstream.codec.rate.choose_default`): the seed's JPEG centre view and the depth
+    hint from 7x7 views up, an AV1 centre with fewer views, and the views coded as one AV1
+    sequence keyed by the centre view where the first frame shows that warping cannot predict
+    them; the hint at 1/8 of the view instead of 1/4 where the first frame shows it predicts
+    the views as well for the bytes it saves. A named preset is used as it is.
+
+    Args:
+        lf: the light field(s), uint8 or float in ``[0, 1]``.
+        quality: the centre view's quality, 1..100.
+        depth_hint: send the depth hint (else the centre view alone).
+        fps: the stream's frame rate.
+        hint_options: the hint's sweep and coding (:class:`HintOptions`).
+        gain_grid: cells per axis of the per-view gain maps.
+        present: mask of the views that exist (the centre view must); recorded in the stream,
+            whose decode leaves the missing views zero.
+        bpp: a target size in bits per pixel instead of ``quality`` and ``depth_hint``: rate
+            control (:mod:`lfstream.codec.rate`) picks the quality, the hint, the preset (unless
+            ``preset`` names one) and the residual layer.
+        preset: the centre view's coding (:data:`PRESETS`).
+        residual: quality 1..100 of the residual layer (:mod:`lfstream.codec.residual`), ``None``
+            for none.
+        residual_mode: what the residual codes: ``prediction``, ``views`` or ``half-views``
+            (:attr:`Encoder.residual_mode`).
+        post_filter: name the decoder's JPEG post-filter the encoder measured best
+            (:attr:`Encoder.post_filter`; ``False``: the default filter).
+        device: where the hint's plane sweep runs (:attr:`Encoder.device`).
+        hance_map: send a JPEG-Hance strength map with each JPEG centre view
+            (:attr:`Encoder.hance_map`; not with ``bpp``).
+
+    Returns:
+        The ``.lfs`` stream (:mod:`lfstream.codec.bitstream`).
 
     Raises:
         LFStreamError: bad shape, dtype, non-finite values or parameters.
+
+    Shape:
+        - lf: ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``
+        - present: ``(U, V)``
     """
     try:
         frames = frames_of(np.asarray(lf) if not hasattr(lf, "numpy") else lf.cpu().numpy())

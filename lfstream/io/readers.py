@@ -772,13 +772,27 @@ def read_lf(
     max_frames: int | None = None,
     first_frame: int = 0,
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-    """Reads a light field; see :class:`ReadOptions` for the options and :func:`load_lf`.
+    """Reads a light field or LF video; the format is detected from the path.
+
+    Args:
+        path: a file or folder (every layout :mod:`lfstream.io.readers` lists).
+        angular, crop, grid, flip_u, flip_v, max_frames, first_frame: how to read it
+            (:class:`ReadOptions`).
+        return_mask: also return the mask of the views that exist.
 
     Returns:
-        The light field ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``. With
-        ``return_mask=True``, a pair ``(lf, present)`` where ``present`` is the ``(U, V)`` bool
-        mask of views that exist (all True when none is missing); missing views are zero.
+        The light field, uint8 (16-bit samples taken to 8 bits, floats as stored). With
+        ``return_mask=True``, a pair ``(lf, present)`` where ``present`` is the ``(U, V)``
+        bool mask of views that exist (all True when none is missing); missing views are zero.
         Without it, a folder with missing views raises :class:`LFMissingViewsError`.
+
+    Raises:
+        LFFileError: the path does not exist or cannot be read.
+        LFFormatError: the content is not a light field lfstream reads.
+
+    Shape:
+        - output: ``(U, V, H, W, 3)`` for one light field, ``(T, U, V, H, W, 3)`` for a video
+        - present: ``(U, V)``
     """
     opts = ReadOptions(angular=angular, crop=crop, grid=grid, flip_u=flip_u, flip_v=flip_v,
                        allow_missing=return_mask, max_frames=max_frames, first_frame=first_frame)

@@ -30,18 +30,32 @@ def write_lf(
     image_ext: str = ".png",
     present: np.ndarray | None = None,
 ) -> Path:
-    """Writes a light field. The format follows ``path``:
+    """Writes a light field or LF video; the format follows ``path``.
 
     * ``*.npy``: the array as is; ``*.npz``: keys ``lf`` (and ``disparity`` if given);
     * a video extension: a mosaic video with the grid in its metadata (when ``lossless``:
       Ut Video for ``.avi``/``.nut``, FFV1 for ``.mkv``, x264 RGB QP 0 for ``.mp4``/``.mov``,
-      VP9 for ``.webm``; else x264 CRF 18, VP9 in ``.webm``;
-      :class:`lfstream.io.VideoWriter`);
-    * anything else: a folder of ``R_C.png`` views (0-based); a video ``(T, ...)`` becomes
-      one sub-folder per frame, ``frame_000000/`` ….
+      VP9 for ``.webm``; else x264 CRF 18, VP9 in ``.webm``; :class:`lfstream.io.VideoWriter`);
+    * anything else: a folder of ``R_C.png`` views (0-based); a video becomes one sub-folder
+      per frame, ``frame_000000/`` ….
 
-    An existing file or non-empty folder is an error unless ``overwrite=True``. ``present``:
-    ``(U, V)`` mask of the views that exist; a folder gets images of those only.
+    Args:
+        path: the output.
+        lf: the light field (uint8 for images and videos).
+        fps: a video's frame rate.
+        lossless: a video's codec, lossless or x264 CRF 18.
+        disparity: ground-truth disparity for a ``.npz``.
+        overwrite: replace an existing file or fill a non-empty folder (else an error).
+        image_ext: the image format of a folder's views.
+        present: mask of the views that exist; a folder gets images of those only.
+
+    Returns:
+        The path written.
+
+    Shape:
+        - lf: ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``
+        - disparity: ``(U, V, H, W)``, ``(H, W)`` or with a leading ``T``
+        - present: ``(U, V)``
     """
     path = Path(path)
     lf = np.asarray(lf)

@@ -135,6 +135,9 @@ def shift_and_sum(
         weights: ``(U, V)`` synthetic-aperture weights (default: all views equal).
         present: ``(U, V)`` bool mask of views that exist (others get weight 0).
 
+    Returns:
+        One refocused image per slope (and frame).
+
     Shape:
         - output: ``(K, H, W, C)`` or ``(T, K, H, W, C)``
     """

@@ -50,6 +50,10 @@ def focal_stack(
     Returns:
         ``(K, H, W, 3)`` (or ``(T, K, H, W, 3)``): uint8 for uint8 input, otherwise the
         input's float dtype in ``[0, 1]``; numpy for numpy, torch (same device) for torch.
+
+    Shape:
+        - lf: ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``; weights, present: ``(U, V)``
+        - output: ``(K, H, W, 3)`` or ``(T, K, H, W, 3)``, K the number of planes
     """
     s = resolve_slopes(alphas, slopes)
     check_lf(lf)
@@ -134,9 +138,18 @@ def all_in_focus(
     A shift-and-sum stack is rendered at ``planes`` slopes spanning the disparity map's
     range and each pixel blends the two planes that bracket its disparity linearly.
 
+    Args:
+        lf: the light field, uint8 or float in ``[0, 1]``.
+        disparity: the centre view's disparity, pixels per view step.
+        planes: how many focal planes the stack has.
+        weights: ``(U, V)`` view weights (``None``: all views alike).
+
+    Returns:
+        The image, in the input's value range.
+
     Shape:
         - lf: ``(U, V, H, W, C)``; disparity: ``(H, W)`` of the centre view
-        - output: ``(H, W, C)``, the input's value range
+        - output: ``(H, W, C)``
     """
     check_lf(lf, allow_video=False)
     d = np.asarray(disparity, np.float64)
