@@ -7,12 +7,14 @@ chooses the target: a whole stream through :func:`lfstream.decode`, or one paylo
 alone (the depth hint, the gain maps, the residual layer, the context-coded levels, the
 metadata JSON) with the rest of the input as its payload.
 
-Any exception other than :class:`lfstream.LFStreamError` is a finding, as are a hang and an
-allocation past the RSS limit; libFuzzer writes the input that caused it (``crash-...``).
+Any exception other than :class:`lfstream.LFStreamError` is a finding, as are a hang, an
+input that raises the process's peak memory by more than :data:`MAX_INPUT_GROWTH_MB` (a
+single huge allocation; the slow growth of a long run's caches is not one) and memory past
+libFuzzer's ``-rss_limit_mb``; libFuzzer writes the input that caused it (``crash-...``).
 Keep each finding as a regression case in ``tests/fuzz_corpus/regressions/``.
 
     python tools/fuzz_decoder.py --seeds tests/fuzz_corpus           # write the seed corpus
-    python tools/fuzz_decoder.py CORPUS_DIR -max_total_time=3600 -rss_limit_mb=1024 -timeout=20
+    python tools/fuzz_decoder.py CORPUS_DIR -max_total_time=3600 -rss_limit_mb=4096 -timeout=20
     python tools/fuzz_decoder.py --replay tests/fuzz_corpus           # every file once, no fuzzing
 
 Needs ``pip install atheris`` (not a dependency of lfstream).
@@ -28,6 +30,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+#: The most one input may raise the process's peak memory, in MB.
+MAX_INPUT_GROWTH_MB = 1024
 #: Targets the first input byte chooses from (modulo their count).
 TARGETS = ("stream", "hint", "gains", "residual", "levels", "meta")
 _HEADER = struct.Struct("<4sHHBBHHIBBHI")
@@ -60,7 +64,18 @@ def repair_crcs(data: bytes) -> bytes:
 
 
 def one_input(data: bytes) -> None:
-    """Runs one input; returns quietly or raises a finding."""
+    """Runs one input; returns quietly or raises a finding (an unexpected exception, or a
+    jump in peak memory of more than :data:`MAX_INPUT_GROWTH_MB`)."""
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    _run_input(data)
+    grown = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    if grown > MAX_INPUT_GROWTH_MB:
+        raise MemoryError(f"one input raised the peak memory by {grown:.0f} MB")
+
+
+def _run_input(data: bytes) -> None:
     import numpy as np
 
     from lfstream.errors import LFStreamError
