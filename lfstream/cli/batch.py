@@ -57,13 +57,18 @@ def _text(r: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from lfstream.cluster import DecodeOptions, EncodeOptions, batch
+    from lfstream.io.outputs import FOLDER, OutputFolder, check_output
 
-    report = batch(args.inputs, args.output, mode=args.mode, engine=args.engine, address=args.address,
-                   workers=args.workers, group_frames=args.group,
-                   encode=EncodeOptions(quality=args.quality, depth_hint=not args.no_depth_hint, preset=args.preset,
-                                        hance_map=args.hance_map),
-                   decode=DecodeOptions(depth=args.depth, hance=args.hance, device=args.device, networks=args.networks),
-                   read=read_options(args), output_format=args.format, overwrite=args.overwrite)
+    # the folder collects many runs' files by design, but one run at a time
+    check_output(args.output, args.inputs, overwrite=True, kinds=(FOLDER,))
+    with OutputFolder(args.output, overwrite=True):
+        report = batch(args.inputs, args.output, mode=args.mode, engine=args.engine, address=args.address,
+                       workers=args.workers, group_frames=args.group,
+                       encode=EncodeOptions(quality=args.quality, depth_hint=not args.no_depth_hint,
+                                            preset=args.preset, hance_map=args.hance_map),
+                       decode=DecodeOptions(depth=args.depth, hance=args.hance, device=args.device,
+                                            networks=args.networks),
+                       read=read_options(args), output_format=args.format, overwrite=args.overwrite)
     emit(args, report.as_dict(), _text)
     if not report.ok:
         failed = [f for f in report.files if f.status != "ok"]
