@@ -190,7 +190,7 @@ class Pipeline:
             if preparing is not None and not self._prepared.is_set():  # Ctrl-C: the source stops and cleans up
                 self._prepare_stop.set()
                 self._prepared.wait()
-        t_start = time.perf_counter()
+        t_start, cpu_start = time.perf_counter(), time.process_time()
         send_channel, recv_channel = self._channels()
         qs = cfg.queue_size
         self.queues = {name: queue.Queue(qs) for name in ("encode", "refocus", "sink", "metrics")}
@@ -247,6 +247,7 @@ class Pipeline:
             receive["gain_fallbacks"] = decoder.decoder.gain_fallbacks
         summary = build_summary(
             wall_s=wall,
+            process_cpu_s=time.process_time() - cpu_start,
             warmup_s=t_start - t_warm,
             frames=self.stats["sink"].frames if self.sender is None else self.stats["encoder"].frames,
             stages=self.stats,

@@ -15,18 +15,22 @@ from lfstream.io._fs import atomic_write_text
 
 @dataclass
 class StageStats:
-    """Frames a stage handled and the time it was busy (its own thread writes it)."""
+    """Frames a stage handled, the wall time it was busy and the CPU time its own thread
+    spent meanwhile (its own thread writes it). The CPU of the worker threads a parallel
+    kernel starts is in the process's total (the summary's ``process_cpu_s``), not here."""
 
     name: str
     frames: int = 0
     busy_s: float = 0.0
+    cpu_s: float = 0.0
 
-    def add(self, frames: int, seconds: float) -> None:
+    def add(self, frames: int, seconds: float, cpu_seconds: float = 0.0) -> None:
         self.frames += frames
         self.busy_s += seconds
+        self.cpu_s += cpu_seconds
 
     def as_dict(self) -> dict:
-        return {"frames": self.frames, "time_s": round(self.busy_s, 4),
+        return {"frames": self.frames, "time_s": round(self.busy_s, 4), "thread_cpu_s": round(self.cpu_s, 4),
                 "ms_per_frame": round(1e3 * self.busy_s / self.frames, 2) if self.frames else None,
                 "fps": round(self.frames / self.busy_s, 2) if self.busy_s > 0 else None}
 
@@ -87,7 +91,8 @@ class QualityStats:
     stack_psnr: dict[int, float] = field(default_factory=dict)
 
 
-def build_summary(*, wall_s: float, warmup_s: float = 0.0, frames: int, stages: dict[str, StageStats], rate: RateStats,
+def build_summary(*, wall_s: float, warmup_s: float = 0.0, process_cpu_s: float | None = None, frames: int,
+                  stages: dict[str, StageStats], rate: RateStats,
                   quality: QualityStats, static: StaticSkipStats, planes: PlaneSkipStats,
                   receive: dict | None, transport: str, refocus: dict | None, hance: dict,
                   interrupted: bool, outputs: list[str], focal_planes: list[dict] | None = None,
@@ -97,6 +102,8 @@ def build_summary(*, wall_s: float, warmup_s: float = 0.0, frames: int, stages: 
         "frames": frames,
         "fps": round(frames / wall_s, 3) if wall_s > 0 else None,
         "wall_s": round(wall_s, 3),
+        # the whole process's CPU over the same time: every stage and every kernel's workers
+        "process_cpu_s": None if process_cpu_s is None else round(process_cpu_s, 3),
         # loading the compiled kernels before the clock started (lfstream.stream.warmup)
         "warmup_s": round(warmup_s, 3),
         "bpp": (rate.bytes * 8 / rate.pixels) if rate.pixels else None,

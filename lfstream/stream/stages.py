@@ -145,11 +145,11 @@ class ConsumerStage(Stage):
         try:
             while (item := self.control.get(self.q_in)) is not None:
                 seq = item.seq
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.thread_time()
                 result = self.work(item)
                 if result is None:
                     continue
-                self.stats.add(1, time.perf_counter() - t0)
+                self.stats.add(1, time.perf_counter() - t0, time.thread_time() - c0)
                 if not self.forward(result):
                     break
         except Exception as exc:
@@ -173,13 +173,13 @@ class ProducerStage(Stage):
         try:
             it = iter(self.source)
             while not self.control.stop_event.is_set():
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.thread_time()
                 try:
                     lf = next(it)
                 except StopIteration:
                     break
                 lf = np.ascontiguousarray(lf)
-                self.stats.add(1, time.perf_counter() - t0)
+                self.stats.add(1, time.perf_counter() - t0, time.thread_time() - c0)
                 if self.originals is not None:
                     self.originals.keep(seq, lf)
                 if not self.control.put(self.q_out, SourceFrame(seq, lf)):
@@ -316,9 +316,9 @@ class DecoderStage(Stage):
                     done = True
                 if pending and (len(pending) >= cfg.batch or done):
                     seq = pending[0].seq
-                    t0 = time.perf_counter()
+                    t0, c0 = time.perf_counter(), time.thread_time()
                     frames = self._decode(dec, pending, prev)
-                    self.stats.add(len(frames), time.perf_counter() - t0)
+                    self.stats.add(len(frames), time.perf_counter() - t0, time.thread_time() - c0)
                     pending = []
                     for f in frames:
                         prev = f

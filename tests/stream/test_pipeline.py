@@ -54,6 +54,10 @@ def test_transports_agree_and_outputs_are_valid(tmp_path, transport):
     assert summary["mssim_frames"] == [0, 1, 2, 3] and 0.5 < summary["mssim"] <= 1
     assert set(summary["stages"]) >= {"producer", "encoder", "decoder", "refocus", "sink", "metrics"}
     assert all(s["frames"] == 4 for s in summary["stages"].values())
+    # each stage's own thread's CPU beside its wall time (a thread cannot spend more CPU than
+    # the time it ran), and the whole process's CPU over the run
+    assert all(0 <= s["thread_cpu_s"] <= s["time_s"] * 1.05 + 0.01 for s in summary["stages"].values())
+    assert summary["process_cpu_s"] >= max(s["thread_cpu_s"] for s in summary["stages"].values())
     assert [row["frame"] for row in summary["per_frame"]] == [0, 1, 2, 3]
     bpp = sum(row["bpp"] for row in summary["per_frame"]) / 4
     assert bpp == pytest.approx(summary["bpp"], rel=1e-3)
