@@ -30,6 +30,12 @@ SHARED_SCENES = {"seahorse": "seahorse5x5/camImagesFlat", "dino": "hci_star/dino
                  "lytro_bikes": "lytro_bikes", "lytro_translucent": "lytro_translucent", "toys_array": "toys_array"}
 
 
+#: The instruction-set extensions a ratio can depend on (numba, OpenCV, the codecs pick
+#: kernels by them): recorded with every result.
+SIMD_FLAGS = ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512bw", "avx512vl", "avx512_vnni", "avx512_bf16",
+              "amx_tile", "amx_bf16")
+
+
 def _version_of(module: str) -> str | None:
     try:
         return __import__(module).__version__
@@ -48,11 +54,15 @@ def metadata() -> dict:
     except OSError:
         commit = None
     cpu = platform.processor() or platform.machine()
+    flags: list[str] = []
     try:
         with open("/proc/cpuinfo") as fh:
             for line in fh:
                 if line.startswith("model name"):
                     cpu = line.split(":", 1)[1].strip()
+                elif line.startswith("flags"):
+                    have = set(line.split(":", 1)[1].split())
+                    flags = [f for f in SIMD_FLAGS if f in have]
                     break
     except OSError:
         pass
@@ -60,7 +70,7 @@ def metadata() -> dict:
         "commit": commit,
         "versions": {"python": platform.python_version(), "torch": torch.__version__, "numpy": np.__version__,
                      "numba": numba.__version__, "opencv": cv2.__version__, "av": _version_of("av")},
-        "device": {"cpu": cpu, "cores": os.cpu_count(),
+        "device": {"cpu": cpu, "cores": os.cpu_count(), "flags": flags,
                    "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None},
         "threads": {"torch": torch.get_num_threads(), "numba": numba.get_num_threads()},
         "time": time.strftime("%Y-%m-%dT%H:%M:%S"),

@@ -38,7 +38,9 @@ def machine(doc: dict) -> str:
     meta = doc["metadata"]
     dev = meta["device"]
     gpu = f", {dev['cuda']}" if dev.get("cuda") else ""
-    return f"{dev['cpu']}, {dev['cores']} cores{gpu}; {meta['time'][:10]}"
+    flags = dev.get("flags") or []
+    simd = " (AVX-512)" if "avx512f" in flags else (" (AVX2)" if "avx2" in flags else "")
+    return f"{dev['cpu']}{simd}, {dev['cores']} cores{gpu}; {meta['time'][:10]}"
 
 
 def _cell(row: dict | None) -> str:
