@@ -7,7 +7,6 @@ import time
 from pathlib import Path
 
 from lfstream.cli._common import emit, parse_size, path_arg
-from lfstream.io._fs import fresh_dir
 
 HELP = "the built-in demo: synthesise a light field, describe it, refocus it"
 DEFAULT_OUTPUT = Path("lfstream-demo")
@@ -20,19 +19,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+
+    from lfstream.io.outputs import FOLDER, check_output, fresh_output_folder
+
+    if args.output is not None:
+        check_output(args.output, overwrite=True, kinds=(FOLDER,))
+    # a folder of its own for this run (-o, else -o-2, ...): never one that holds results
+    with fresh_output_folder(args.output or DEFAULT_OUTPUT) as claim:
+        return _demo(args, claim.path)
+
+
+def _demo(args: argparse.Namespace, out) -> int:
     from lfstream.cli.info import describe
     from lfstream.io import LoadedLF, write_image, write_lf, write_video
     from lfstream.metrics import psnr
     from lfstream.refocus import focal_stack
     from lfstream.synth import synth_clip
 
-    out = fresh_dir(args.output or DEFAULT_OUTPUT)
     h, w = args.size
     t0 = time.perf_counter()
     clip = synth_clip(frames=1, views=7, size=(h, w), seed=0, noise=2.0, vignetting=0.3)
     synth_s = time.perf_counter() - t0
     lf = clip.lf[0]
-    out.mkdir(parents=True, exist_ok=True)
     write_lf(out / "lightfield.npz", lf, disparity=clip.disparity[0])
     info = describe(LoadedLF(lf=lf, format="synthetic", path=out / "lightfield.npz", disparity=clip.disparity[0]))
     t0 = time.perf_counter()
