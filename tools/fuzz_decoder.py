@@ -34,14 +34,16 @@ sys.path.insert(0, str(ROOT))
 MAX_INPUT_GROWTH_MB = 1024
 #: Targets the first input byte chooses from (modulo their count).
 TARGETS = ("stream", "hint", "gains", "residual", "levels", "meta")
-_HEADER = struct.Struct("<4sHHBBHHIBBHI")
-_PACKET = struct.Struct("<4sIQIIII")
-_PACKET_V3 = struct.Struct("<4sIQIIIII")
 
 
 def repair_crcs(data: bytes) -> bytes:
     """``data`` with the header's and each packet's CRC-32 recomputed where the layout
     allows finding them; bytes past what can be parsed are left as they are."""
+    from lfstream.codec.bitstream import _HEADER_FIXED as _HEADER  # the container's own layouts
+    from lfstream.codec.bitstream import _PACKET_FIXED as _PACKET
+    from lfstream.codec.bitstream import _PACKET_FIXED_V3 as _PACKET_V3
+    from lfstream.codec.bitstream import VERSION_RESIDUAL
+
     out = bytearray(data)
     if len(out) < _HEADER.size:
         return bytes(out)
@@ -52,7 +54,7 @@ def repair_crcs(data: bytes) -> bytes:
         return bytes(out)
     struct.pack_into("<I", out, end, zlib.crc32(out[:end]))
     pos = end + 4
-    layout = _PACKET_V3 if version >= 3 else _PACKET
+    layout = _PACKET_V3 if version >= VERSION_RESIDUAL else _PACKET
     while pos + layout.size <= len(out):
         lengths = layout.unpack_from(out, pos)[3:]
         stop = pos + layout.size + sum(lengths)

@@ -87,11 +87,12 @@ def run(args: argparse.Namespace) -> int:
             present = header_present(header)
             # a stream of one frame decodes to one light field (U, V, H, W, 3), as lfstream
             # reads a still; a longer stream's range keeps its frame axis
-            if available is None:
+            if available is None:  # one packet or more is all that is asked
                 read_header(fh)
-                available = count_packets(fh, header)[0]
+                available = count_packets(fh, header, most=2)[0]
                 fh.seek(0)
             still = available == 1
+            written = None if args.synthesize_missing else present  # the views a folder gets
             for f in iter_decode(fh, synthesize_missing=args.synthesize_missing, depth=args.depth,
                                  occlusion=not args.no_occlusion, hance=hance,
                                  device=args.device, batch=args.batch, deblock=not args.no_deblock,
@@ -100,19 +101,13 @@ def run(args: argparse.Namespace) -> int:
                 with interrupt_after():  # a frame's outputs are written whole
                     t_write = time.perf_counter()
                     if still:  # one light field in, one out: (U, V, H, W, 3), views in the folder itself
-                        write_lf(args.output, f.lf, fps=fps, overwrite=args.overwrite,
-                                 present=None if args.synthesize_missing else present)
-                        count += 1
-                        write_s += time.perf_counter() - t_write
-                        if args.disparity_out is not None:
-                            write_pfm(args.disparity_out / f"frame_{f.seq:06d}.pfm", f.disparity)
-                        continue
-                    if writer is None:
-                        # a folder's frames keep the stream's numbers, as the maps do
-                        writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite,
-                                             first_index=f.seq,
-                                             present=None if args.synthesize_missing else present)
-                    writer.write(f.lf)
+                        write_lf(args.output, f.lf, fps=fps, overwrite=args.overwrite, present=written)
+                    else:
+                        if writer is None:
+                            # a folder's frames keep the stream's numbers, as the maps do
+                            writer = FrameWriter(args.output, expected, fps=fps, overwrite=args.overwrite,
+                                                 first_index=f.seq, present=written)
+                        writer.write(f.lf)
                     write_s += time.perf_counter() - t_write
                     count += 1
                     if args.disparity_out is not None:

@@ -377,14 +377,17 @@ def iter_packets(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits()) 
         expected += 1
 
 
-def count_packets(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits()) -> tuple[int, BitstreamError | None]:
+def count_packets(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits(),
+                  most: int | None = None) -> tuple[int, BitstreamError | None]:
     """How many complete packets follow the header (read, checksums and all, up to the
     first damaged one: the frames a decode gives), and the damage that ended the count
-    (``None`` where the stream ends cleanly)."""
+    (``None`` where the stream ends cleanly); ``most``: stop counting there."""
     count = 0
     try:
         for _ in iter_packets(fh, header, limits):
             count += 1
+            if most is not None and count >= most:
+                break
     except BitstreamError as exc:
         return count, exc
     return count, None

@@ -58,8 +58,9 @@ def check_output(path: str | os.PathLike, inputs: Iterable[str | os.PathLike | N
     if not text.strip():
         raise LFValueError(f"{what}: an empty path; name the output")
     path = Path(text)
+    existing_parent = _existing_parent(path)
     try:
-        limit = os.pathconf(_existing_parent(path), "PC_NAME_MAX")
+        limit = os.pathconf(existing_parent, "PC_NAME_MAX")
     except (OSError, ValueError):
         limit = 255
     if len(os.fsencode(path.name)) > limit:
@@ -86,7 +87,7 @@ def check_output(path: str | os.PathLike, inputs: Iterable[str | os.PathLike | N
     parent = _resolved(path).parent
     if not is_folder and not parent.is_dir():
         raise LFFileError(f"{what} {path}: the folder {parent} does not exist")
-    _probe_writable(_existing_parent(path), path, what)
+    _probe_writable(existing_parent, path, what)
     if path.exists() and not os.access(path, os.W_OK):
         raise LFFileError(f"{what} {path}: cannot write it (permission denied)")
     return path

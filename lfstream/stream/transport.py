@@ -351,7 +351,7 @@ class TcpSender:
 
     def _send(self, tag: bytes, payload: bytes) -> None:
         try:
-            self._sock.sendall(_FRAME.pack(tag, len(payload)) + payload)
+            self._sock.sendall(_frame(tag, payload))
         except OSError as exc:
             raise TransportError(f"{self._addr}: send failed ({exc.strerror or exc})") from exc
 

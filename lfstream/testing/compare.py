@@ -172,7 +172,9 @@ def _levels(frame: np.ndarray) -> np.ndarray:
     if frame.dtype == np.uint8:
         return frame
     if frame.dtype == np.uint16:
-        return np.round(frame / 257.0).astype(np.uint8)
+        from lfstream.io.images import eight_bit
+
+        return eight_bit(frame)
     return np.asarray(frame, np.float32) * np.float32(255.0)
 
 
@@ -405,18 +407,13 @@ def compare_report(reference, test, thresholds: Thresholds | None = None, option
     ref, tst = open_frames(reference, options), open_frames(test, test_options or options)
     report = ComparisonReport(ref.name, tst.name, ref.views, ref.size, thresholds)
     worst_db = np.inf
-    if not keep_worst:
-        for result in compare_sources(ref, tst, thresholds):
-            report.frames.append(result)
-            if on_frame is not None:
-                on_frame(result)
-        return report
-    ref_frames, tst_frames = _tee_last(ref), _tee_last(tst)
+    if keep_worst:
+        ref_frames, tst_frames = _LastFrame(ref), _LastFrame(tst)
     for result in compare_sources(ref, tst, thresholds):
         report.frames.append(result)
         u, v = result.metrics.worst_view
         db = float(result.metrics.psnr[u, v])
-        if db < worst_db or report.worst is None:
+        if keep_worst and (db < worst_db or report.worst is None):
             worst_db = db
             report.worst = (result.frame, (u, v), _to_uint8(ref_frames.last[u, v]), _to_uint8(tst_frames.last[u, v]))
         if on_frame is not None:
@@ -439,6 +436,3 @@ class _LastFrame:
         self.last = next(self._it)
         return self.last
 
-
-def _tee_last(source: FrameSource) -> _LastFrame:
-    return _LastFrame(source)
