@@ -93,11 +93,11 @@ def run(args: argparse.Namespace) -> int:
     hance_mapped = False  # strength maps sent (not where the default codes the views themselves)
     hint_scale = HintOptions().hint_scale  # the hint's resolution divisor (the default may double it)
     if args.bpp is not None:
-        from lfstream.codec.rate import choose_configuration
+        from lfstream.codec.rate_model import choose_rate
 
         # rate control encodes every frame while it searches: its stream is written as it is
         t0 = time.perf_counter()
-        rate = choose_configuration(source.whole, args.bpp, fps, present, preset=args.preset)
+        rate = choose_rate(source.whole, args.bpp, fps, present, preset=args.preset)
         quality, depth_hint, preset, residual = rate.quality, rate.depth_hint, rate.preset, rate.residual
         residual_mode = rate.residual_mode
         hint_scale = rate.header.meta.get("hint", {}).get("hint_scale", hint_scale)

@@ -478,13 +478,14 @@ def encode(
             raise
         raise LFValueError(f"lf: not an array ({exc})") from exc
     if bpp is not None:
-        from lfstream.codec.rate import RATE_CONTROL_CHOOSES, choose_configuration, rate_control_conflict
+        from lfstream.codec.rate import RATE_CONTROL_CHOOSES, rate_control_conflict
+        from lfstream.codec.rate_model import choose_rate
 
         conflict = rate_control_conflict(residual, residual_mode, post_filter, hance_map)
         if conflict:
             raise LFValueError(f"{conflict}: rate control (bpp) {RATE_CONTROL_CHOOSES[conflict]}")
         # rate control encoded every frame already: its stream is the answer
-        return choose_configuration(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream(present)
+        return choose_rate(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream(present)
     from lfstream.codec.rate import choose_default, uses_default_choice
 
     first = None

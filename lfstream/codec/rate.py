@@ -99,13 +99,15 @@ HINT_COARSEN_DB_PER_PERCENT = 0.03
 #: +0.0077 on seahorse, bikes, translucent), balanced +0.42...+2.16 dB / +0.0050...+0.0589;
 #: 7x7 and up, fast meets x265 medium on every 7x7 sample (bench/codec.py).
 DEFAULT_PRESET_BY_VIEWS = ((9, "best"), (48, "balanced"))
-#: Rate control's searches: ``quick`` codes every frame once in the default's configuration
+#: Rate control's searches: ``model`` predicts each family's size and quality from trials on
+#: the first frame and codes once (:mod:`lfstream.codec.rate_model`, the default); ``quick``
+#: codes every frame once in the default's configuration
 #: (:func:`choose_default` under the named preset) and searches the centre view's quality, and
 #: the residual's where the centre cannot spend the target (:func:`_quick_configuration`);
 #: ``full`` tries every preset, hint precision, the residual layer and the views modes, and
 #: decodes each candidate to keep the best measured one. The quick search is the ``fast``
 #: preset's.
-SEARCHES = ("quick", "full")
+SEARCHES = ("model", "quick", "full")
 #: The quick search adds the residual layer where the centre view alone needs a quality above
 #: this: past it a JPEG spends its bits on a view the warp then blurs (lytro_bikes at 0.08
 #: bpp: q96 alone 33.17 dB, q88 with a residual 34.85; at 0.04 q85 alone loses 0.38 dB MPSNR
@@ -620,6 +622,22 @@ def _quick_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     return _choice(candidates, target_bpp)
 
 
+def validate_target(target_bpp: float, search: str | None = None, preset: str | None = None) -> None:
+    """A ``bpp`` target, a search (:data:`SEARCHES`) and a preset, else one
+    :class:`~lfstream.errors.LFValueError` before any encoding."""
+    from lfstream.codec.encoder import preset_coding
+
+    # a number only: a string or None is the same one line (np.isfinite raised a TypeError
+    # on it, and a numeric string got past a float() check to fail at the comparison)
+    number = isinstance(target_bpp, (int, float, np.integer, np.floating)) and not isinstance(target_bpp, bool)
+    if not (number and np.isfinite(target_bpp) and target_bpp > 0):
+        raise LFValueError(f"bpp: a positive target in bits per pixel, got {target_bpp!r}")
+    if search is not None and search not in SEARCHES:
+        raise LFValueError(f"search: one of {', '.join(SEARCHES)}, got {search!r}")
+    if preset is not None:
+        preset_coding(preset)  # an unknown name fails before any encoding
+
+
 def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, present: np.ndarray | None = None,
                          hint_options: HintOptions | None = None, gain_grid: int = 4,
                          preset: str | None = None, residual: bool = True, views_hint: bool = False,
@@ -639,18 +657,12 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
     Shape:
         - frames: ``(T, U, V, H, W, 3)``
     """
-    from lfstream.codec.encoder import PRESETS, Encoder, preset_coding
+    from lfstream.codec.encoder import PRESETS, Encoder
     from lfstream.metrics import bpp
 
-    # a number only: a string or None is the same one line (np.isfinite raised a TypeError
-    # on it, and a numeric string got past a float() check to fail at the comparison)
-    number = isinstance(target_bpp, (int, float, np.integer, np.floating)) and not isinstance(target_bpp, bool)
-    if not (number and np.isfinite(target_bpp) and target_bpp > 0):
-        raise LFValueError(f"bpp: a positive target in bits per pixel, got {target_bpp!r}")
-    if search is not None and search not in SEARCHES:
-        raise LFValueError(f"search: one of {', '.join(SEARCHES)}, got {search!r}")
-    if preset is not None:
-        preset_coding(preset)  # an unknown name fails before any encoding
+    validate_target(target_bpp, search, preset)
+    if search == "model":
+        raise LFValueError("search: the model is lfstream.codec.rate_model.choose_rate's")
     if preset is not None and (search or ("quick" if preset == "fast" else "full")) == "quick":
         quick = _quick_configuration(frames, target_bpp, fps, present, hint_options, gain_grid, preset, residual,
                                      views_hint)
@@ -721,4 +733,4 @@ __all__ = ["RATE_CONTROL_CHOOSES", "rate_control_conflict",
            "HINT_COARSEN_MAX_LOSS_DB", "HINT_COARSEN_DB_PER_PERCENT", "coarsening_allowance",
            "DEFAULT_PRESET_BY_VIEWS", "default_preset",
            "RateChoice", "DefaultChoice",
-           "choose_configuration", "choose_default", "uses_default_choice", "follow_rate", "prediction_psnr"]
+           "choose_configuration", "validate_target", "choose_default", "uses_default_choice", "follow_rate", "prediction_psnr"]

@@ -20,7 +20,8 @@ import numpy as np
 from lfstream.codec.bitstream import Packet, with_present
 from lfstream.codec.decoder import DecodedFrame, Decoder
 from lfstream.codec.encoder import Encoder, with_default_hance_map
-from lfstream.codec.rate import choose_configuration, choose_default, uses_default_choice
+from lfstream.codec.rate import choose_default, uses_default_choice
+from lfstream.codec.rate_model import choose_rate
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.lightfield import canonical_views
 from lfstream.stream.config import StreamConfig
@@ -223,7 +224,7 @@ class EncoderStage(ConsumerStage):
         if not self.started and self.config.bpp is not None:
             # rate control on the first frame: the quality and hint the whole stream uses;
             # views_hint: the focal planes are fitted to the decoded disparity
-            choice = choose_configuration(lf[None], self.config.bpp, self.config.fps, self.present,
+            choice = choose_rate(lf[None], self.config.bpp, self.config.fps, self.present,
                                           preset=self.config.preset, views_hint=True)
             self.encoder = Encoder(quality=choice.quality, depth_hint=choice.depth_hint, preset=choice.preset,
                                    hint_options=choice.hint_options, residual=choice.residual,
