@@ -107,6 +107,32 @@ def speed_table(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def rate_table(doc: dict) -> str:
+    """``bench/rate.py``: every scene, target and rate-control row with its margins over x265
+    medium and SVT-AV1 preset 4 at the same size and its speed against x265 medium, then the
+    video row."""
+    head = ["scene", "T", "rate control", "family", "bpp", "MPSNR / MSSIM", "Δ vs x265 medium (dB / MSSIM)",
+            "Δ vs SVT-AV1 p4 (dB / MSSIM)", "encode s", "encode vs x265 medium", "decode vs HEVC"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in doc["results"]:
+        for p in r["points"]:
+            a, b = p["vs x265 medium"], p["vs SVT-AV1 p4"]
+            lines.append("| " + " | ".join([
+                r["scene"], f"{p['target_bpp']:g}", f"`{p['row']}`", p["family"], f"{p['bpp']:.4f}",
+                f"{p['mpsnr']:.2f} / {p['mssim']:.4f}", f"{a['mpsnr_db']:+.2f} / {a['mssim']:+.4f}",
+                f"{b['mpsnr_db']:+.2f} / {b['mssim']:+.4f}", f"{p['encode_s']:.2f}", f"{a['encode_speed']:.2f}×",
+                f"{a['decode_speed']:.2f}×"]) + " |")
+    video = doc.get("video")
+    if video:
+        lines += ["", f"Video: the synthetic clip ({video['frames']} frames of {video['shape'][1]}×{video['shape'][2]}×"
+                      f"{video['shape'][3]}×{video['shape'][4]}) at `--bpp {video['target_bpp']:g}`: "
+                      f"{video['bpp']:.4f} bpp overall, the largest frame {video['max_frame_over_target']:.2f}× the target, "
+                      f"{video['encode_s_per_frame']:.2f} s a frame against x265 medium's "
+                      f"{video['x265_medium_s_per_frame']:.2f} s ({video['family']} family)."]
+    lines += ["", f"`bench/rate.py` on {machine(doc)}."]
+    return "\n".join(lines) + "\n"
+
+
 def generic_table(doc: dict, columns: Sequence[str] | None = None, limit: int = 60) -> str:
     """Any bench document's results as a table of their scalar fields."""
     rows = doc["results"]
@@ -195,7 +221,7 @@ def bench_sections() -> str:
     and results."""
     out = []
     for path in sorted(RESULTS.glob("*.json")):
-        if path.stem == "codec":
+        if path.stem in ("codec", "rate"):  # their own tables
             continue
         doc = json.loads(path.read_text())
         out += [f"### `bench/{path.stem}.py`", "", f"Measured on {machine(doc)}.", "", generic_table(doc)]
@@ -211,7 +237,7 @@ def readme_blocks() -> dict[str, str]:
 def docs_blocks() -> dict[str, str]:
     """The docs pages' generated blocks by name (made once a build)."""
     codec = load("codec")
-    return {"results": results_table(codec), "speed": speed_table(codec), "zoo": zoo_table(),
+    return {"results": results_table(codec), "speed": speed_table(codec), "zoo": zoo_table(), "rate": rate_table(load("rate")),
             "cli": cli_reference(), "bench": bench_sections(), "machine": f"Measured on {machine(codec)}.\n"}
 
 
