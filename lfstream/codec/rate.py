@@ -325,6 +325,11 @@ def coarsening_allowance(first: Packet, coarse_hint_bytes: int) -> float:
     return min(HINT_COARSEN_MAX_LOSS_DB, HINT_COARSEN_DB_PER_PERCENT * saved_percent)
 
 
+#: The keys every rate-control candidate row has beside its configuration (one schema for
+#: the model's rows and the searches'): the searches code every row they list and predict none.
+SEARCHED = {"family": None, "coded": True, "predicted_db": None, "predicted_bpp": None}
+
+
 def _stream_bytes(header: StreamHeader, packets) -> int:
     """Bytes of the ``.lfs`` stream ``header`` and ``packets`` make."""
     return len(pack_header(header)) + sum(p.size(header.version) for p in packets)
@@ -515,6 +520,13 @@ def _first_frame_mpsnr(frames: np.ndarray, present: np.ndarray | None, header: S
     return float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
 
 
+def _family(c: dict) -> str:
+    """A candidate's family in the model's words (:mod:`lfstream.codec.rate_model`)."""
+    if c["residual"] is None:
+        return "centre"
+    return "views" if c["residual_mode"] in VIEW_MODES else "prediction"
+
+
 def _choice(candidates: list[dict], target_bpp: float) -> RateChoice:
     """The candidate within :data:`RATE_TOLERANCE` of the target with the best measured
     first-frame MPSNR (else the nearest to the target), as a :class:`RateChoice`."""
@@ -525,7 +537,7 @@ def _choice(candidates: list[dict], target_bpp: float) -> RateChoice:
 
     best = min(candidates, key=rank)
     header_q, packets_q, opts_q = best["_stream"]
-    report = tuple({k: v for k, v in c.items() if k != "_stream"} for c in candidates)
+    report = tuple({**{k: v for k, v in c.items() if k != "_stream"}, "family": _family(c)} for c in candidates)
     return RateChoice(best["quality"], best["depth_hint"], best["bpp"], best["mpsnr_first_frame"], report, header_q,
                       packets_q, best["preset"], opts_q, best["residual"], best["residual_mode"] or "prediction")
 
@@ -577,7 +589,7 @@ def _quick_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
             candidates.append({"preset": preset, "quality": q, "depth_hint": at_q.has_hint,
                                "hint_scale": hint.hint_scale if at_q.has_hint and hint is not None else None,
                                "residual": r, "residual_mode": None if r is None else mode, "bpp": bpp(got, frames.shape),
-                               "mpsnr_first_frame": None, "_stream": (at_q, tuple(moved), hint or HintOptions())})
+                               "mpsnr_first_frame": None, **SEARCHED, "_stream": (at_q, tuple(moved), hint or HintOptions())})
 
     def centre_only(encoder: Encoder, packets: list[Packet], hint: HintOptions | None) -> tuple[int, int]:
         header = encoder.header(views, size, fps)
@@ -682,7 +694,7 @@ def choose_configuration(frames: np.ndarray, target_bpp: float, fps: float, pres
             moved: list[Packet], opts: HintOptions) -> None:
         candidates.append({"preset": name, "quality": q, "depth_hint": at_q.has_hint, "hint_scale": hint_scale,
                            "residual": r, "residual_mode": mode, "bpp": bpp(_stream_bytes(at_q, moved), frames.shape),
-                           "mpsnr_first_frame": _first_frame_mpsnr(frames, present, at_q, moved),
+                           "mpsnr_first_frame": _first_frame_mpsnr(frames, present, at_q, moved), **SEARCHED,
                            "_stream": (at_q, tuple(moved), opts)})
 
     hints = [hint_options] if hint_options is not None else [HintOptions(), HintOptions(hint_scale=COARSE_HINT_SCALE)]

@@ -319,6 +319,10 @@ def model_configuration(frames: np.ndarray, target_bpp: float, fps: float, prese
 
     Shape:
         - frames: ``(T, U, V, H, W, 3)``
+
+    Each candidate row has the searches' keys (the configuration, ``bpp`` and
+    ``mpsnr_first_frame`` of the first frame where coded) and
+    :data:`lfstream.codec.rate.SEARCHED`'s (``family``, ``coded``, the predictions).
     """
     from lfstream.codec.encoder import Encoder, preset_coding
     from lfstream.codec.residual import encode_residual
@@ -484,15 +488,18 @@ def model_configuration(frames: np.ndarray, target_bpp: float, fps: float, prese
         packets.append(pkt)
     total = _stream_bytes(best.header, packets)
     report = []
+    hint_scale = choice.encoder.hint_options.hint_scale
     for e in estimates:
-        row = {"family": e.family, "predicted_db": round(e.db, 3), "predicted_bpp": bpp_of(int(e.predicted_bytes), f0.shape),
-               "quality": e.quality, "residual": e.residual, "coded": False, "mpsnr_first_frame": None,
-               "bpp_first_frame": None}
+        hinted = e.family != "views" or views_hint
+        row = {"preset": effort, "quality": e.quality, "depth_hint": hinted, "hint_scale": hint_scale if hinted else None,
+               "residual": e.residual, "residual_mode": None if e.residual is None else
+               ("views" if e.family == "views" else "prediction"), "bpp": None, "mpsnr_first_frame": None,
+               "family": e.family, "coded": False, "predicted_db": round(e.db, 3),
+               "predicted_bpp": bpp_of(int(e.predicted_bytes), f0.shape)}
         for c in coded:
             if c.family == e.family:
                 row.update({"coded": True, "quality": c.estimate.quality, "residual": c.estimate.residual,
-                            "mpsnr_first_frame": round(c.db, 3),
-                            "bpp_first_frame": bpp_of(_packet_bytes(c.header, c.packet), f0.shape)})
+                            "mpsnr_first_frame": round(c.db, 3), "bpp": bpp_of(_packet_bytes(c.header, c.packet), f0.shape)})
         report.append(row)
     hdr = best.header
     return RateChoice(int(hdr.quality), bool(hdr.has_hint), bpp_of(total, frames.shape), best.db, tuple(report), hdr,

@@ -87,7 +87,7 @@ def test_the_model_lands_within_the_tolerance_and_reports_its_predictions(frame,
     assert coded and all(np.isfinite(c["predicted_db"]) for c in choice.candidates)
     # the size model predicted the coded family's bytes within a third before coding it
     for c in coded:
-        assert abs(np.log(c["bpp_first_frame"] / c["predicted_bpp"])) < np.log(1.34), c
+        assert abs(np.log(c["bpp"] / c["predicted_bpp"])) < np.log(1.34), c
     # the stream is what it says: decoded, it has the measured quality
     dec = lfstream.decode(choice.stream())[0]
     assert float(mpsnr(frame[0], dec)) == pytest.approx(choice.mpsnr_first_frame, abs=1e-6)
@@ -127,6 +127,14 @@ def test_a_video_is_held_to_its_budget_and_no_frame_passes_the_cap():
     frame_bpp = [bpp(p.size(choice.header.version), clip.shape[1:]) for p in choice.packets]
     assert max(frame_bpp) <= FRAME_CAP * 0.08
     assert lfstream.decode(data).shape == clip.shape
+
+
+def test_the_candidate_rows_have_one_schema_whatever_the_search(frame):
+    model = choose_rate(frame, 0.1, 30.0, search="model").candidates
+    full = choose_rate(frame, 0.1, 30.0, search="full").candidates
+    keys = {frozenset(c) for c in model + full}
+    assert len(keys) == 1, keys
+    assert {c["family"] for c in full} <= {"centre", "prediction", "views"}
 
 
 def test_the_model_is_the_default_search_and_the_fast_preset_keeps_the_quick_one(frame, monkeypatch):
