@@ -14,7 +14,7 @@ from __future__ import annotations
 import io
 import os
 from collections.abc import Iterator
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -91,6 +91,13 @@ class DecodedFrame:
     disparity: np.ndarray  # (H, W) float32 centre-view disparity the warp used
     axes: np.ndarray | None = None  # (2, 2) view axes the disparity moves along; None: the convention
     gains: np.ndarray | None = None  # (U, V, gh, gw, 1 or 3) shading gains the views carry; None: none
+
+
+def _settle(jobs: list[Future | None]) -> None:
+    """Cancels the jobs not started and waits for the running ones, their outcome unread."""
+    running = [j for j in jobs if j is not None and not j.cancel()]
+    if running:
+        wait(running)
 
 
 @dataclass
@@ -420,7 +427,15 @@ class Decoder:
         dests = [None] * len(packets) if out is None else list(out)
         if len(dests) != len(packets):
             raise LFValueError(f"out: one array (or None) per packet, got {len(dests)} for {len(packets)}")
-        frames = self._decode_batch(packets, centres, dests)
+        residuals = self._start_residuals(packets) if self._depth_net is None else [None] * len(packets)
+        try:
+            frames = self._decode_batch(packets, centres, dests, residuals)
+        except BaseException:
+            # a frame that fails (a damaged centre view, a hint) leaves no residual decode
+            # behind: queued ones are cancelled and running ones waited for, so a run of
+            # damaged streams cannot pile work up on the worker threads
+            _settle(residuals)
+            raise
         for f, dest in zip(frames, dests):
             if dest is not None and f.lf is not dest:  # a path that does not write in place
                 dest[...] = f.lf
@@ -428,9 +443,8 @@ class Decoder:
         return frames
 
     def _decode_batch(self, packets: list[Packet], centres: np.ndarray | None,
-                      out: list[np.ndarray | None]) -> list[DecodedFrame]:
+                      out: list[np.ndarray | None], residuals: list[Future | None]) -> list[DecodedFrame]:
         h, w = self.header.size
-        residuals = self._start_residuals(packets) if self._depth_net is None else [None] * len(packets)
         if centres is None:
             centres = self.decode_centres(packets)
         hints: list[np.ndarray | None] = []

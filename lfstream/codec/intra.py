@@ -213,6 +213,7 @@ def decode_av1(data: bytes, size: tuple[int, int], frame: int | None = None) -> 
     import av
 
     h, w = size
+    failure = None
     try:
         ctx = av.CodecContext.create("libdav1d", "r")
         # dav1d refuses a frame larger than the stream's before allocating it
@@ -222,8 +223,13 @@ def decode_av1(data: bytes, size: tuple[int, int], frame: int | None = None) -> 
         frames = list(ctx.decode(av.Packet(data))) + list(ctx.decode(None))
     except (av.error.FFmpegError, ValueError) as exc:
         if getattr(exc, "errno", None) == errno.ERANGE:  # refused by max_pixels
-            raise BitstreamError(f"centre view's AV1 frame is larger than the header says ({h}x{w})", frame) from exc
-        raise BitstreamError(f"centre view is not a decodable AV1 frame ({exc})", frame) from exc
+            failure = f"centre view's AV1 frame is larger than the header says ({h}x{w})"
+        else:
+            failure = f"centre view is not a decodable AV1 frame ({exc})"
+    if failure is not None:
+        # raised outside the handler, unchained: PyAV's error would keep this frame and its
+        # decoder alive as long as the caller keeps ours (lfstream.codec.residual's note)
+        raise BitstreamError(failure, frame)
     if len(frames) != 1:
         raise BitstreamError(f"centre view holds {len(frames)} AV1 frames, expected 1", frame)
     f = frames[0]

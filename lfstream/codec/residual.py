@@ -313,6 +313,7 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
     # (dav1d_flush: the workers drained) before the context is freed.
     ctx.thread_count = _decoder_threads(fmt, len(data))
     decoded = []
+    failure = None
     try:
         for p in packets:
             decoded.extend(ctx.decode(av.Packet(p)))
@@ -320,11 +321,19 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
     except (av.error.FFmpegError, ValueError) as exc:
         _drain(ctx)
         if getattr(exc, "errno", None) == errno.ERANGE:  # refused by max_pixels
-            raise BitstreamError(f"residual frames are larger than the header says ({h}x{w})", frame) from exc
-        raise BitstreamError(f"residual is not a decodable AV1 sequence ({exc})", frame) from exc
+            failure = f"residual frames are larger than the header says ({h}x{w})"
+        else:
+            failure = f"residual is not a decodable AV1 sequence ({exc})"
     except BaseException:  # Ctrl-C, a deadline: drained as well
         _drain(ctx)
         raise
+    if failure is not None:
+        # the decoder and its frames freed here, on the thread that made them, before the
+        # error leaves: an error chained to PyAV's kept this frame (and through it the
+        # dav1d context) alive until the caller dropped it, often on another thread, and a
+        # long run of hostile streams grew the process's memory by kilobytes a stream
+        del ctx, decoded
+        raise BitstreamError(failure, frame)
     if len(decoded) != count + lead:
         raise BitstreamError(f"residual holds {len(decoded) - lead} AV1 frames, expected {count}", frame)
     planes = np.empty((count, (h + h % 2) * 3 // 2, w + w % 2), np.uint8)

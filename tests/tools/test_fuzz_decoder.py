@@ -61,3 +61,49 @@ def test_a_short_coverage_guided_run_finds_nothing(tmp_path):
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert not list(tmp_path.glob("crash-*")) and not list(tmp_path.glob("oom-*"))
+
+
+def _decode_leaving_jobs(data: bytes, monkeypatch) -> list:
+    """Decodes ``data`` (a damaged stream: raises) and returns the residual decodes it started."""
+    import lfstream
+    from lfstream.codec.decoder import Decoder
+    from lfstream.errors import LFStreamError
+
+    started = []
+    real = Decoder._start_residuals
+
+    def recording(self, packets):
+        jobs = real(self, packets)
+        started.extend(j for j in jobs if j is not None)
+        return jobs
+
+    monkeypatch.setattr(Decoder, "_start_residuals", recording)
+    with pytest.raises(LFStreamError):
+        lfstream.decode(fuzz_decoder.repair_crcs(data[1:]))
+    return started
+
+
+def test_a_frame_that_fails_leaves_no_residual_decode_behind(monkeypatch):
+    """The finding kept as regression-abandoned-residual: its JPEG centre view has no frame
+    header, so the frame fails at once while its residual (a long AV1 sequence) was decoding
+    on a worker thread; the jobs of a run of such streams piled up on the workers, growing
+    the fuzzer's memory without bound. Every job is settled when the decode fails."""
+    for _ in range(5):
+        jobs = _decode_leaving_jobs((CORPUS / "regression-abandoned-residual").read_bytes(), monkeypatch)
+        assert jobs and all(j.done() for j in jobs)
+
+
+def test_a_residual_that_fails_keeps_no_decoder_alive_through_its_error():
+    """The finding kept as regression-leak-residual-error: a residual dav1d refuses mid-sequence.
+    The error chained to PyAV's kept decode_residual's frame, and with it the dav1d context,
+    alive as long as the caller kept the error (kilobytes a stream on a long run); it is
+    raised unchained, outside the handler."""
+    from lfstream.codec.bitstream import split_stream
+    from lfstream.codec.residual import decode_residual
+    from lfstream.errors import BitstreamError
+
+    header, packets = split_stream(fuzz_decoder.repair_crcs((CORPUS / "regression-leak-residual-error").read_bytes()[1:]))
+    p = next(p for p in packets if p.residual)
+    with pytest.raises(BitstreamError, match="not a decodable AV1 sequence") as info:
+        decode_residual(p.residual, header.views, header.size, p.seq, p.image)
+    assert info.value.__cause__ is None and info.value.__context__ is None
