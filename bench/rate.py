@@ -24,7 +24,7 @@ from _harness import SHARED, SHARED_SCENES, emit, parser
 import lfstream
 from lfstream.codec.baseline import decode_views, encode_views
 from lfstream.codec.bitstream import split_stream
-from lfstream.codec.rate_model import choose_rate
+from lfstream.codec.rate import choose_rate
 from lfstream.metrics import bpp, capped, mpsnr, mssim
 from lfstream.synth import synth_clip
 

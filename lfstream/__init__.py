@@ -25,8 +25,7 @@ from lfstream.errors import (  # noqa: F401 - public, listed through errors.__al
     WeightsError,
 )
 from lfstream.io import ReadOptions, load_lf, read_lf, read_pfm, write_lf, write_pfm
-
-__version__ = "0.1.0"
+from lfstream.version import __version__
 
 
 def __getattr__(name: str):

@@ -74,7 +74,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from lfstream import __version__
+    from lfstream.version import __version__
 
     parser = _Parser(
         prog="lfstream",

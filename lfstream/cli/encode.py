@@ -64,8 +64,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from lfstream.codec.api import with_default_hance_map
     from lfstream.codec.bitstream import with_present
-    from lfstream.codec.encoder import Encoder, encode_file, with_default_hance_map, write_stream_file
+    from lfstream.codec.encoder import Encoder, encode_file, write_stream_file
     from lfstream.codec.rate import RATE_CONTROL_CHOOSES, choose_default, rate_control_conflict, uses_default_choice
     from lfstream.errors import LFValueError
     from lfstream.io.outputs import check_output
@@ -93,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     hance_mapped = False  # strength maps sent (not where the default codes the views themselves)
     hint_scale = HintOptions().hint_scale  # the hint's resolution divisor (the default may double it)
     if args.bpp is not None:
-        from lfstream.codec.rate_model import choose_rate
+        from lfstream.codec.rate import choose_rate
 
         # rate control encodes every frame while it searches: its stream is written as it is
         t0 = time.perf_counter()

@@ -18,6 +18,7 @@ Importing this package does not import torch or compile kernels; the networks an
 numba warp load when first used.
 """
 
+from lfstream.codec.api import encode
 from lfstream.codec.bitstream import Limits, Packet, StreamHeader
 from lfstream.codec.decoder import (
     BATCH_RANGE,
@@ -30,7 +31,7 @@ from lfstream.codec.decoder import (
     decode_file,
     iter_decode,
 )
-from lfstream.codec.encoder import ENCODER_NAME, Encoder, EncodeStats, encode, encode_file, frames_of
+from lfstream.codec.encoder import ENCODER_NAME, Encoder, EncodeStats, encode_file, frames_of
 from lfstream.codec.hint import HintOptions
 from lfstream.codec.jpeg import QUALITY_RANGE, decode_jpeg, encode_jpeg, jpeg_roundtrip
 

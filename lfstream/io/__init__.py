@@ -21,6 +21,7 @@ from lfstream.io.readers import (
     open_lf_frames,
     open_video_lf,
     read_lf,
+    read_mosaic_video,
     reads_lazily,
     video_folder_format,
 )
@@ -31,7 +32,6 @@ from lfstream.io.video import (
     VideoWriter,
     grid_metadata,
     iter_video_frames,
-    read_mosaic_video,
     video_grid_and_fps,
     write_video,
 )

@@ -760,6 +760,15 @@ def _load_folder(folder: Path, opts: ReadOptions) -> LoadedLF:
     return LoadedLF(lf=lf, format="frames-folder", path=folder, disparity=disparity, fps=fps)
 
 
+def read_mosaic_video(
+    path: Path, grid: tuple[int, int] | None = None, max_frames: int | None = None
+) -> tuple[np.ndarray, float | None]:
+    """Reads a video whose frames are SAI mosaics; returns ``((T, U, V, H, W, 3), fps)``
+    (:func:`lfstream.io.open_video_lf`'s frames, collected)."""
+    video = open_video_lf(path, ReadOptions(grid=grid, max_frames=max_frames))
+    return collect_frames(video.frames, video.count, Path(path)), video.fps
+
+
 def read_lf(
     path: str | os.PathLike,
     *,
@@ -804,4 +813,5 @@ def read_lf(
 
 
 __all__ = ["ReadOptions", "LoadedLF", "VideoLF", "LAZY_EXTS", "load_lf", "read_lf", "open_video_lf", "open_lf_frames",
+           "read_mosaic_video",
            "reads_lazily"]

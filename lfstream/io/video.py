@@ -235,17 +235,6 @@ def collect_frames(frames: Iterator[np.ndarray], count: int | None, source: Path
     return np.concatenate([out, np.stack(extra)]) if extra else out
 
 
-def read_mosaic_video(
-    path: Path, grid: tuple[int, int] | None = None, max_frames: int | None = None
-) -> tuple[np.ndarray, float | None]:
-    """Reads a video whose frames are SAI mosaics; returns ``((T, U, V, H, W, 3), fps)``
-    (:func:`lfstream.io.open_video_lf`'s frames, collected)."""
-    from lfstream.io.readers import ReadOptions, open_video_lf  # the readers build on this module
-
-    video = open_video_lf(path, ReadOptions(grid=grid, max_frames=max_frames))
-    return collect_frames(video.frames, video.count, Path(path)), video.fps
-
-
 class VideoWriter:
     """Incremental video writer (context manager): frames go in one by one, the file is
     written under a temporary name and renamed when closed, so an interrupted write never
@@ -457,4 +446,4 @@ def grid_metadata(views: tuple[int, int]) -> dict[str, str]:
 
 __all__ = ["VIDEO_EXTS", "GRID_METADATA_KEY", "GRID_METADATA_PREFIX", "SIZE_METADATA_PREFIX", "LOSSLESS_X264", "LOSSLESS_CODECS",
            "VideoWriter", "rgb_to_video_i420", "write_video", "iter_video_frames", "VideoInfo", "video_info",
-           "video_grid_and_fps", "collect_frames", "read_mosaic_video", "grid_metadata"]
+           "video_grid_and_fps", "collect_frames", "grid_metadata"]

@@ -123,8 +123,8 @@ class Refocuser:
         """What the measured choice depends on: device, light-field shape, planes, versions."""
         import torch
 
-        from lfstream import __version__
         from lfstream.models.manifest import manifest_entry
+        from lfstream.version import __version__
 
         entry = manifest_entry("refnet", "fast") or {}
         return "|".join(str(x) for x in (self.config.device, lf.shape, np.round(self.slopes, 6).tolist(), __version__,

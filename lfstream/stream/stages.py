@@ -17,11 +17,11 @@ from typing import Any
 import cv2
 import numpy as np
 
+from lfstream.codec.api import with_default_hance_map
 from lfstream.codec.bitstream import Packet, with_present
 from lfstream.codec.decoder import DecodedFrame, Decoder
-from lfstream.codec.encoder import Encoder, with_default_hance_map
-from lfstream.codec.rate import choose_default, uses_default_choice
-from lfstream.codec.rate_model import choose_rate
+from lfstream.codec.encoder import Encoder
+from lfstream.codec.rate import choose_default, choose_rate, uses_default_choice
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.lightfield import canonical_views
 from lfstream.stream.config import StreamConfig

@@ -329,7 +329,7 @@ class TcpSender:
         of this protocol fails here, before a frame is encoded."""
         import json
 
-        from lfstream import __version__
+        from lfstream.version import __version__
 
         self._send(TAG_HELLO, json.dumps({"protocol": PROTOCOL, "lfstream": __version__}).encode())
         not_lfstream = f"{self._addr}: not an lfstream receiver (start one with lfstream serve)"
@@ -413,7 +413,7 @@ class TcpReceiver:
     def _greet(self) -> None:
         import json
 
-        from lfstream import __version__
+        from lfstream.version import __version__
 
         try:
             conn = self._accept(self._greet_stop)

@@ -151,7 +151,7 @@ def record(source, reference=None, options=None, settings: dict | None = None,
         settings: recorded as they are (what made ``source``).
         tolerance: per metric, overriding :data:`DEFAULT_TOLERANCE`.
     """
-    from lfstream import __version__
+    from lfstream.version import __version__
 
     src = open_frames(source, options)
     ref = open_frames(reference, options) if reference is not None else None
@@ -181,7 +181,7 @@ def golden_from_rows(rows: Sequence[dict], tolerance: dict[str, dict[str, float]
                      digests: Sequence[str] | None = None) -> Golden:
     """A golden of measurements made elsewhere: ``rows`` of ``{"frame": k, metric: value, ...}``
     (a pipeline's per-frame summary, say), with ``digests`` of the frames where known."""
-    from lfstream import __version__
+    from lfstream.version import __version__
 
     frames = [GoldenFrame(int(r["frame"]), digests[i] if digests else None,
                           {k: float(v) for k, v in r.items() if k != "frame"}) for i, r in enumerate(rows)]

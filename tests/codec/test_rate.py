@@ -58,7 +58,7 @@ def test_quality_search_finds_the_bisection_bracket_in_fewer_probes():
     """The interpolating search returns exactly plain bisection's bracket for any growing
     size curve (plateaus included, targets beyond either end) and probes less."""
     from lfstream.codec.jpeg import QUALITY_RANGE
-    from lfstream.codec.rate import _quality_bracket
+    from lfstream.codec.rate.search import _quality_bracket
 
     def plain(size, target):
         lo, hi = QUALITY_RANGE
@@ -108,7 +108,7 @@ def test_follow_rate_moves_the_quality_toward_the_budget():
 def test_a_stream_under_a_budget_lands_on_it_though_later_frames_cost_less(monkeypatch):
     """Rate control measures the first (key) frame; delta hints and gain maps make the
     later ones cheaper, and the stream's follower raises the quality to spend the budget."""
-    import lfstream.codec.rate as rate
+    import lfstream.codec.rate.common as rate
     from lfstream.stream import Pipeline, StreamConfig
     from lfstream.stream.sources import synthetic_source
 
@@ -262,9 +262,9 @@ def test_the_default_sends_the_coarser_hint_where_it_predicts_as_well():
     preset's with hint_scale 8, byte for byte: the same sweep, frame 0 not coded twice):
     here 9 % fewer bytes for the same picture (measured 35.771 vs 35.775 dB); a threshold
     no hint can meet keeps 1/4."""
-    from lfstream.codec import rate
     from lfstream.codec.bitstream import split_stream
     from lfstream.codec.hint import HintOptions
+    from lfstream.codec.rate import default as rate
 
     clip = synth_clip(2, 7, (144, 176), seed=4, noise=1.0, vignetting=0.2, motion=0.5, camera_pan=0).lf
     data = lfstream.encode(clip)
@@ -286,9 +286,9 @@ def test_the_default_keeps_the_finer_hint_where_the_coarser_saves_too_little():
     worth less than that (HINT_COARSEN_DB_PER_PERCENT), and decodes 0.25 dB worse: the
     default keeps 1/4. With the allowance as loose as the check alone (the rule before),
     it sent the 1/8 hint."""
-    from lfstream.codec import rate
     from lfstream.codec.bitstream import split_stream
     from lfstream.codec.hint import HintOptions
+    from lfstream.codec.rate import default as rate
 
     clip = synth_clip(2, 7, (144, 176), seed=5, noise=1.0, vignetting=0.2, motion=0.5, camera_pan=0).lf
     data = lfstream.encode(clip)
@@ -378,7 +378,7 @@ def test_the_quick_search_adds_the_residual_where_the_centre_saturates_and_keeps
 def test_the_quick_search_weighs_the_hint_where_it_is_much_of_the_budget(scene, monkeypatch):
     """Where the hint is a large share of the target, no hint is a candidate too (its
     centre view gets those bytes), measured like the full search's."""
-    import lfstream.codec.rate as rate
+    import lfstream.codec.rate.search as rate
 
     monkeypatch.setattr(rate, "QUICK_HINT_SHARE", 0.0)
     choice = choose_configuration(scene, 0.12, 30.0, preset="fast")
@@ -399,7 +399,7 @@ def test_the_quick_search_leaves_unpredictable_views_to_the_full_search(unpredic
 def test_the_quick_search_stops_at_the_first_probe_near_the_target():
     """``near``: the first probe within that share of the target is taken (fewer AV1
     sequence encodes), the lowest quality probed only where every probe passed the target."""
-    from lfstream.codec.rate import _fitting_quality
+    from lfstream.codec.rate.search import _fitting_quality
 
     sizes = np.exp(np.linspace(np.log(1e3), np.log(1e6), 100))  # log-linear in quality 1..100
 

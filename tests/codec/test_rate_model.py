@@ -1,4 +1,4 @@
-"""Rate control by the model (lfstream.codec.rate_model): its size model against the sizes it
+"""Rate control by the model (lfstream.codec.rate.model): its size model against the sizes it
 then measures, the families it picks, a video held to its budget, and its fit against the
 exhaustive search on the same scene."""
 
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 import lfstream
-from lfstream.codec import rate_model
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.rate import SEARCHES
-from lfstream.codec.rate_model import (
+from lfstream.codec.rate import model as rate_model
+from lfstream.codec.rate.model import (
     FRAME_CAP,
     RATE_TOLERANCE_MODEL,
     _crop,

@@ -290,7 +290,7 @@ def test_rate_control_codes_the_views_where_that_wins(unpredictable):
     assert choice.packets[0].residual[0] == VIEWS_KEYED_FORMAT
     assert choice.header.meta["residual"]["svt_preset"] == choice.header.meta["centre"]["svt_preset"] == VIEWS_SPEED["best"]
     # a stream fits its focal planes to the hint: there the views candidate carries one
-    from lfstream.codec.rate import _views_candidate
+    from lfstream.codec.rate.search import _views_candidate
 
     q, header, packets = _views_candidate(frames, None, "best", 30.0, target * frames[0].size / 3 / 8, hint=True)
     assert header.has_hint and packets[0].hint and 1 <= q <= choice.quality

@@ -1,6 +1,6 @@
 """Rate control as a model of bytes against quality: one trial, one encode, at most one re-encode.
 
-A stream under a target has three families of configuration (:mod:`lfstream.codec.rate`):
+A stream under a target has three families of configuration (:mod:`lfstream.codec.rate.search`):
 
 - ``centre``: the centre view and the depth hint (the decoder warps the centre into every
   view); its quality saturates at the warp's floor however many bits the centre gets;
@@ -41,20 +41,22 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_header
+from lfstream.codec.encoder import Encoder, preset_coding
 from lfstream.codec.hint import HintOptions
 from lfstream.codec.intra import av1_fits, decode_centre, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE
-from lfstream.codec.rate import (
+from lfstream.codec.rate.common import (
     FOLLOW_MAX_STEP,
     FOLLOW_STEP_GROWTH,
     RateChoice,
     _first_frame_mpsnr,
     _stream_bytes,
-    choose_configuration,
-    choose_default,
     follow_rate,
     validate_target,
 )
+from lfstream.codec.rate.default import choose_default
+from lfstream.codec.rate.search import choose_configuration
+from lfstream.codec.residual import apply_residual, encode_residual, encode_views_keyed
 from lfstream.lightfield import centre_index, to_uint8
 
 #: How far from the target (relative) a model-chosen single light field may land before
@@ -223,7 +225,6 @@ def sequence_trials(frame: np.ndarray, prediction: np.ndarray, centre_bytes: flo
         - frame, prediction: ``(U, V, H, W, 3)`` uint8
     """
     from lfstream.codec.intra import decode_av1
-    from lfstream.codec.residual import apply_residual, encode_residual, encode_views_keyed
 
     u, v = frame.shape[:2]
     c0 = centre_index(u, v)
@@ -324,8 +325,6 @@ def model_configuration(frames: np.ndarray, target_bpp: float, fps: float, prese
     ``mpsnr_first_frame`` of the first frame where coded) and
     :data:`lfstream.codec.rate.SEARCHED`'s (``family``, ``coded``, the predictions).
     """
-    from lfstream.codec.encoder import Encoder, preset_coding
-    from lfstream.codec.residual import encode_residual
     from lfstream.metrics import bpp as bpp_of
 
     effort = preset if preset in EFFORTS else "best"
@@ -522,7 +521,7 @@ def _set_quality(encoder, quality: int, family: str, step: int) -> None:
 def choose_rate(frames: np.ndarray, target_bpp: float, fps: float, present: np.ndarray | None = None,
                 hint_options: HintOptions | None = None, gain_grid: int = 4, preset: str | None = None,
                 views_hint: bool = False, search: str | None = None):
-    """Rate control's entry point: ``search`` one of :data:`lfstream.codec.rate.SEARCHES` (``None``: ``quick``
+    """Rate control's entry point: ``search`` one of :data:`~lfstream.codec.rate.common.SEARCHES` (``None``: ``quick``
     under the ``fast`` preset, else ``model``). The model falls back to the full search
     where it does not apply (:func:`model_configuration`).
 
