@@ -19,7 +19,7 @@ from lfstream.codec.bitstream import (
 from lfstream.codec.encoder import PRESETS
 from lfstream.codec.intra import CentreCoding, av1_crf, decode_av1, encode_av1
 from lfstream.errors import BitstreamError, LFValueError
-from lfstream.metrics import bpp, mpsnr, psnr
+from lfstream.metrics import mpsnr, psnr
 from lfstream.synth import synth_clip
 
 
