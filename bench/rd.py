@@ -5,16 +5,19 @@ HCI "star" scenes as their centre 3x3, the only complete square of views they ha
 
 - lfstream's presets (fast = JPEG, balanced / best = AV1 centre view; all with the depth
   hint) and its default (no preset named: the encoder's choice per scene) over a sweep of
-  qualities, and lfstream's rate control (``encode(lf, bpp=T)``, every
-  preset and hint precision considered; and ``encode(lf, bpp=T, preset="fast")``, the
-  fast preset's quick search) at targets T from 0.005 to 0.1 bpp;
+  qualities, and lfstream's rate control (``encode(lf, bpp=T)``: the model; the exhaustive
+  search it replaces, every preset and hint precision coded and decoded; and
+  ``encode(lf, bpp=T, preset="fast")``, the fast preset's quick search) at targets T from
+  0.005 to 0.1 bpp;
 - x265 preset medium and preset ultrafast, and SVT-AV1 (presets 8 and 4), each coding the views as
   one pseudo-sequence (raster order, one key frame) over a sweep of constant QP / CRF.
 
 Per point: bpp, MPSNR, MSSIM, encode seconds (one timed run after a warm-up) and decode
 seconds (the median of --runs, default 5); the same harness and metric code for every
 method. Per scene: BD-rate on MPSNR and on MSSIM and BD-PSNR of every method against x265
-medium (piecewise cubic over the overlapping range, lfstream.metrics.bd_rate); every
+medium and against SVT-AV1 preset 4 (piecewise cubic over the overlapping range,
+lfstream.metrics.bd_rate); rate control's model (the default) beside the exhaustive search it
+replaces; a video row (the synthetic clip at ``--bpp 0.02``, bench/rate.py's); every
 lfstream point's encode speed against x265 medium's median encode in the same run (the
 rate control's speed target at every T) and its decode speed against x265
 medium's decode at the same bpp; one PNG with both curves.
@@ -40,6 +43,8 @@ from lfstream.synth import synth_clip
 
 os.environ.setdefault("SVT_LOG", "1")
 ANCHOR = "x265 medium"
+#: The second anchor of the BD tables: the strongest pseudo-sequence measured here.
+SECOND_ANCHOR = "SVT-AV1 p4"
 QUALITIES = (10, 25, 40, 55, 70, 85, 95)
 TARGETS = (0.005, 0.01, 0.02, 0.04, 0.08, 0.1)
 BASELINES = {  # method -> (codec, preset, parameters)
@@ -99,14 +104,16 @@ def lfstream_curve(lf: np.ndarray, preset: str | None, quick: bool, runs: int) -
     return pts
 
 
-def rate_control_curve(lf: np.ndarray, quick: bool, runs: int, preset: str | None = None) -> list[dict]:
+def rate_control_curve(lf: np.ndarray, quick: bool, runs: int, preset: str | None = None,
+                       search: str | None = None) -> list[dict]:
     """Rate control at every target; ``preset`` named: only that preset (``fast``: the quick
-    search, lfstream.codec.rate.SEARCHES)."""
+    search); ``search``: one of lfstream.codec.rate.SEARCHES (``None``: the default, the model)."""
     from lfstream.codec.bitstream import split_stream
+    from lfstream.codec.rate import choose_rate
 
     pts = []
     for target in TARGETS[1:5] if quick else TARGETS:
-        data, t_enc = _timed(lambda: lfstream.encode(lf, bpp=target, preset=preset))
+        data, t_enc = _timed(lambda: choose_rate(lf[None], target, 30.0, preset=preset, search=search).stream())
         rec, t_dec = _timed_decode(lambda: lfstream.decode(data)[0], runs)
         header = split_stream(data)[0]
         p = _point(lf, data, rec, target, t_enc, t_dec)
@@ -145,12 +152,12 @@ def decode_speed(curves: dict[str, list[dict]]) -> dict[str, list[float]]:
             for m, c in curves.items() if m.startswith("lfstream")}
 
 
-def bjontegaard(curves: dict[str, list[dict]]) -> dict[str, dict]:
-    """Every method against x265 medium; None (with the reason) where the curves do not overlap."""
-    a = curves[ANCHOR]
+def bjontegaard(curves: dict[str, list[dict]], anchor: str = ANCHOR) -> dict[str, dict]:
+    """Every method against ``anchor``; None (with the reason) where the curves do not overlap."""
+    a = curves[anchor]
     out = {}
     for method, b in curves.items():
-        if method == ANCHOR:
+        if method == anchor:
             continue
         row = {}
         for key, fn, metric in (("bd_rate_psnr_pct", bd_rate, "mpsnr"), ("bd_rate_ssim_pct", bd_rate, "mssim"),
@@ -168,6 +175,8 @@ def main(argv=None) -> dict:
     p = parser(__doc__)
     p.add_argument("--scenes", help="comma-separated scene names (default: all found)")
     p.add_argument("--png-dir", type=Path, default=ROOT / "bench" / "results")
+    p.add_argument("--skip-full-search", action="store_true", help="leave out the exhaustive search's curve")
+    p.add_argument("--no-video", action="store_true", help="leave out the video row (bench/rate.py's)")
     p.add_argument("--skip-presets", action="store_true",
                    help="leave out the fixed-preset lfstream curves (rate control and the baselines only)")
     args = p.parse_args(argv)
@@ -180,15 +189,22 @@ def main(argv=None) -> dict:
         curves = {} if args.skip_presets else {f"lfstream {preset or 'default'}": lfstream_curve(lf, preset, args.quick, runs)
                                                for preset in PRESETS}
         curves["lfstream --bpp (rate control)"] = rate_control_curve(lf, args.quick, runs)
+        if not args.skip_full_search:
+            curves["lfstream --bpp (full search)"] = rate_control_curve(lf, args.quick, runs, search="full")
         curves["lfstream --bpp --preset fast"] = rate_control_curve(lf, args.quick, runs, preset="fast")
         for method, (codec, preset, params) in BASELINES.items():
             curves[method] = baseline_curve(lf, codec, preset, params, runs)
         bd = bjontegaard(curves)
+        bd_p4 = bjontegaard(curves, SECOND_ANCHOR)
         speed = encode_speed(curves)
         dspeed = decode_speed(curves)
         results.append({"scene": name, "shape": list(lf.shape), "curves": curves, "bjontegaard_vs_x265_medium": bd,
+                        "bjontegaard_vs_svt_av1_p4": bd_p4,
                         "encode_speed_vs_x265_medium": speed, "decode_speed_vs_x265_medium": dspeed})
         rd_figure(name, curves, machine, args.png_dir / f"rd_{name}.png")
+        for method, row in bd_p4.items():
+            cells = [f"{k} {v:+7.1f}" if v is not None else f"{k}    n/a" for k, v in row.items() if k != "why"]
+            print(f"{name:18s} {method:30s} vs SVT-AV1 p4: " + "  ".join(cells), flush=True)
         for method, row in bd.items():
             cells = [f"{k} {v:+7.1f}" if v is not None else f"{k}    n/a" for k, v in row.items() if k != "why"]
             print(f"{name:18s} {method:30s} " + "  ".join(cells), flush=True)
@@ -198,7 +214,13 @@ def main(argv=None) -> dict:
         for method, ratios in dspeed.items():
             print(f"{name:18s} {method:30s} decode speed vs x265 medium at the same bpp, per point: "
                   + " ".join(f"{r:.2f}x" for r in ratios), flush=True)
-    return emit(args, results)
+    extra = {}
+    if not args.no_video:
+        from rate import video_row
+
+        extra["video"] = video_row(args.quick, 0.02)
+        print("video", extra["video"], flush=True)
+    return emit(args, results, extra)
 
 
 if __name__ == "__main__":

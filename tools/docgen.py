@@ -133,6 +133,26 @@ def rate_table(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def bd_table(doc: dict) -> str:
+    """``bench/rd.py``: per scene and method, the BD-rates (MPSNR / MSSIM; negative: fewer
+    bits for the same quality) against x265 medium and against SVT-AV1 preset 4."""
+    head = ["scene", "method", "BD-rate vs x265 medium (PSNR / SSIM)", "BD-rate vs SVT-AV1 p4 (PSNR / SSIM)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def cell(row: dict | None) -> str:
+        if row is None:
+            return "—"
+        vals = [row.get("bd_rate_psnr_pct"), row.get("bd_rate_ssim_pct")]
+        return " / ".join("n/a" if v is None else f"{v:+.1f} %" for v in vals)
+
+    for r in doc["results"]:
+        vs_x265, vs_p4 = r["bjontegaard_vs_x265_medium"], r.get("bjontegaard_vs_svt_av1_p4", {})
+        for method in [m for m in r["curves"] if m not in ("x265 medium", "SVT-AV1 p4")]:
+            lines.append(f"| {r['scene']} | {method} | {cell(vs_x265.get(method))} | {cell(vs_p4.get(method))} |")
+    lines += ["", f"`bench/rd.py` on {machine(doc)}."]
+    return "\n".join(lines) + "\n"
+
+
 def generic_table(doc: dict, columns: Sequence[str] | None = None, limit: int = 60) -> str:
     """Any bench document's results as a table of their scalar fields."""
     rows = doc["results"]
@@ -221,7 +241,7 @@ def bench_sections() -> str:
     and results."""
     out = []
     for path in sorted(RESULTS.glob("*.json")):
-        if path.stem in ("codec", "rate"):  # their own tables
+        if path.stem in ("codec", "rate", "rd"):  # their own tables
             continue
         doc = json.loads(path.read_text())
         out += [f"### `bench/{path.stem}.py`", "", f"Measured on {machine(doc)}.", "", generic_table(doc)]
@@ -238,6 +258,7 @@ def docs_blocks() -> dict[str, str]:
     """The docs pages' generated blocks by name (made once a build)."""
     codec = load("codec")
     return {"results": results_table(codec), "speed": speed_table(codec), "zoo": zoo_table(), "rate": rate_table(load("rate")),
+            "bd": bd_table(load("rd")) if (RESULTS / "rd.json").exists() else "",
             "cli": cli_reference(), "bench": bench_sections(), "machine": f"Measured on {machine(codec)}.\n"}
 
 
