@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 from lfstream.cli._common import add_first_frame, emit, int_in, interrupt_after, path_arg
 from lfstream.codec.decoder import BATCH_RANGE, DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
+from lfstream.errors import LFValueError
 from lfstream.models.device import PRECISIONS
 
 HELP = "decode an .lfs stream to a light field (.npy, folder or video)"
@@ -18,7 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto",
                    help="disparity source: the stream's hint, flat (zero), or Depth-Net (default: hint if present)")
     p.add_argument("--no-occlusion", action="store_true", help="warp without occlusion-aware per-view disparity")
-    p.add_argument("--no-hance", action="store_true", help="skip JPEG-Hance (default: run it where it helps)")
+    p.add_argument("--no-hance", action="store_true",
+                   help="deprecated, the same as --hance off (it goes in the next release)")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto",
                    help="JPEG-Hance: auto (by the stream's JPEG quality, measured threshold; on a stream encoded "
                    "with --hance-map, always), on or off; a stream encoded with --hance-map gets the network's "
@@ -83,7 +86,12 @@ def run(args: argparse.Namespace) -> int:
             check_memory(4 * frame_bytes, f"{args.input}: decoding a frame")
             if expected:
                 check_disk(args.output, expected * frame_bytes, f"-o {args.output}")
-            hance = "off" if args.no_hance else args.hance
+            hance = args.hance
+            if args.no_hance:
+                if args.hance not in ("auto", "off"):
+                    raise LFValueError(f"--no-hance and --hance {args.hance}: give one (--no-hance is --hance off)")
+                print("lfstream decode: --no-hance is deprecated; use --hance off", file=sys.stderr)
+                hance = "off"
             present = header_present(header)
             # a stream of one frame decodes to one light field (U, V, H, W, 3), as lfstream
             # reads a still; a longer stream's range keeps its frame axis

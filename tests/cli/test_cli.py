@@ -1017,3 +1017,16 @@ def test_a_stream_failing_before_any_output_leaves_no_folder_it_made(capsys, tmp
     (tmp_path / "mine").mkdir()
     code, _, _ = run(capsys, "stream", "--no-depth-hint", "--depth", "net", "--frames", "2", "-o", tmp_path / "mine")
     assert code == 2 and (tmp_path / "mine").is_dir()
+
+
+def test_no_hance_is_a_deprecated_spelling_of_hance_off(capsys, tmp_path):
+    import lfstream
+
+    (tmp_path / "c.lfs").write_bytes(lfstream.encode(synth_clip(1, 3, (24, 32), seed=9).lf, quality=20))
+    code, _, err = run(capsys, "decode", tmp_path / "c.lfs", "-o", tmp_path / "a.npy", "--no-hance")
+    assert code == 0 and "deprecated" in err and "--hance off" in err
+    code, _, _ = run(capsys, "decode", tmp_path / "c.lfs", "-o", tmp_path / "b.npy", "--hance", "off")
+    assert code == 0 and np.array_equal(np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy"))
+    code, _, err = run(capsys, "decode", tmp_path / "c.lfs", "-o", tmp_path / "c.npy", "--no-hance", "--hance", "on")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--no-hance" in err
+    assert not (tmp_path / "c.npy").exists()

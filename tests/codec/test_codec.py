@@ -336,7 +336,7 @@ def test_decode_with_networks_and_switches(tmp_path):
     src = tmp_path / "c.lfs"
     src.write_bytes(data)
     out = tmp_path / "out.npy"
-    assert main(["decode", str(src), "-o", str(out), "--depth", "net", "--no-hance", "--batch", "2", "--json"]) == 0
+    assert main(["decode", str(src), "-o", str(out), "--depth", "net", "--hance", "off", "--batch", "2", "--json"]) == 0
     dec = np.load(out)
     # batched network inference may differ in the last float bit, so by at most one level
     assert np.abs(dec.astype(int) - lfstream.decode(data, depth="net", hance="off")).max() <= 1
