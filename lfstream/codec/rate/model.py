@@ -79,8 +79,11 @@ TRIAL_SPEED = 13
 #: Prior slope of MPSNR against bytes for the sequence families (dB per doubling), used to
 #: compare the trials at equal bytes.
 DB_PER_DOUBLING = 1.6
-#: Where the two best predictions differ by less than this (dB), both are coded and decoded.
-DECIDE_MARGIN_DB = 0.25
+#: Where the two best predictions differ by less than this (dB), both are coded and decoded:
+#: the trials' MPSNR predicted the coded families' within about a dB on the shared samples
+#: and the synthetic scenes (their mosaic is a quarter of each view, and small views' mosaics
+#: are harder than the view).
+DECIDE_MARGIN_DB = 1.0
 #: The share of a prediction-residual candidate's bytes its centre view takes.
 RESIDUAL_CENTRE_SHARE = 0.45
 #: How far over the target a coded candidate may land and still be chosen (relative).
@@ -97,6 +100,17 @@ FRAME_CAP = 3.0
 #: A video frame whose size is off what the budget allows it by more than this factor (either
 #: way) is coded once more.
 FRAME_REDO = 1.25
+#: Bytes a frame of a sequence costs whatever it holds (AV1 frame headers and the payload's
+#: framing: a sequence of flat views measured 27-29 bytes a view at 96x128 to 352x512): kept
+#: out of the trial's scaling from the mosaic's pixels to the view's.
+SEQUENCE_FRAME_BYTES = 27
+#: The sequence trials' first quality, and how far (quality steps) the prior slope may carry
+#: it before a second trial measures the slope where the target lies (log-size is not
+#: linear over the whole range: it falls faster at the lowest qualities).
+TRIAL_QUALITY = 30
+TRIAL_REACH = 8
+#: Light fields of at most this many pixels (all views) are tried whole, not on a mosaic.
+TRIAL_WHOLE_PIXELS = 4_000_000
 #: The crop trial's views are this fraction of the view per side (a quarter of the pixels).
 TRIAL_CROP = 0.5
 
@@ -189,8 +203,9 @@ def _crop(frame: np.ndarray) -> np.ndarray:
     """A trial sample of every view: the central :data:`TRIAL_CROP` of each quadrant, the four
     stitched into one view of a quarter of the pixels (a single central crop misjudges scenes
     whose centre differs from the rest: a glass bottle in front of a plain wall). Sides are
-    multiples of 16, so the stitches fall on coding-block edges; views too small for AV1's
-    minimum are taken whole.
+    multiples of 16, so the stitches fall on coding-block edges; light fields of at most
+    :data:`TRIAL_WHOLE_PIXELS` (their trials are cheap, and a small view's mosaic is mostly
+    stitches) and views too small for AV1's minimum are taken whole.
 
     Shape:
         - frame: ``(U, V, H, W, C)``
@@ -198,7 +213,7 @@ def _crop(frame: np.ndarray) -> np.ndarray:
     """
     h, w = frame.shape[2:4]
     th, tw = int(h * TRIAL_CROP / 2) // 16 * 16, int(w * TRIAL_CROP / 2) // 16 * 16
-    if th < 8 or tw < 8 or not av1_fits((2 * th, 2 * tw)):
+    if th < 8 or tw < 8 or not av1_fits((2 * th, 2 * tw)) or frame[..., 0].size <= TRIAL_WHOLE_PIXELS:
         return frame
     rows = []
     for y0 in (0, h // 2):
@@ -211,36 +226,59 @@ def _crop(frame: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate(rows, axis=2))
 
 
-def sequence_trials(frame: np.ndarray, prediction: np.ndarray, centre_bytes: float, quality: int,
-                    present: np.ndarray | None) -> dict[str, tuple[float, float]]:
-    """Both sequence families on the central crop of every view at one ``quality`` and
-    :data:`TRIAL_SPEED`: family -> (bytes of the whole frame, MPSNR dB of the crop).
-
-    ``prediction`` is the decoder's warp with the centre coded at the residual candidate's
-    quality, ``centre_bytes`` that centre's size (the ``prediction`` family's bytes include
-    it; the ``views`` family's key frame is its own centre). Bytes are scaled from the crop's
-    pixels to the view's (the effort's preset is applied by the caller).
+def sequence_trial(frame: np.ndarray, prediction: np.ndarray | None, quality: int,
+                   present: np.ndarray | None) -> tuple[float, float]:
+    """One sequence family on the trial mosaic of every view (:func:`_crop`) at ``quality``
+    and :data:`TRIAL_SPEED`: (its bytes scaled to the whole view, MPSNR dB of the mosaic).
+    ``prediction``: the decoder's warp the ``prediction`` family's residual corrects (its
+    centre view's bytes are the caller's); ``None``: the ``views`` family (its key frame is
+    its own centre view).
 
     Shape:
         - frame, prediction: ``(U, V, H, W, 3)`` uint8
     """
     from lfstream.codec.intra import decode_av1
 
-    u, v = frame.shape[:2]
-    c0 = centre_index(u, v)
-    crop, pred = _crop(frame), _crop(prediction)
+    crop = _crop(frame)
     scale = (frame.shape[2] * frame.shape[3]) / (crop.shape[2] * crop.shape[3])
-    out: dict[str, tuple[float, float]] = {}
-    residual = encode_residual(crop, pred, quality, TRIAL_SPEED)
-    rec = apply_residual(pred.copy(), residual)
-    out["prediction"] = (centre_bytes + scale * len(residual), _views_db(crop, rec, present))
-    if present is None or np.all(present):
-        key, rest = encode_views_keyed(crop, quality, TRIAL_SPEED)
-        rec = np.zeros_like(crop)
-        rec[c0] = decode_av1(key, crop.shape[2:4])
-        apply_residual(rec, rest, centre=key)
-        out["views"] = (scale * (len(key) + len(rest)), _views_db(crop, rec, present))
-    return out
+    frames = frame.shape[0] * frame.shape[1] - 1
+    fixed = SEQUENCE_FRAME_BYTES * frames  # framing that does not grow with the pixels
+
+    def whole(n: int) -> float:
+        return fixed + scale * max(n - fixed, 0)
+
+    if prediction is not None:
+        pred = _crop(prediction)
+        residual = encode_residual(crop, pred, quality, TRIAL_SPEED)
+        return whole(len(residual)), _views_db(crop, apply_residual(pred.copy(), residual), present)
+    key, rest = encode_views_keyed(crop, quality, TRIAL_SPEED)
+    rec = np.zeros_like(crop)
+    rec[centre_index(*frame.shape[:2])] = decode_av1(key, crop.shape[2:4])
+    apply_residual(rec, rest, centre=key)
+    return whole(len(key) + len(rest)), _views_db(crop, rec, present)
+
+
+def fitted_trial(frame: np.ndarray, prediction: np.ndarray | None, target_bytes: float, speed: int,
+                 present: np.ndarray | None) -> tuple[int, float, float, float]:
+    """A sequence family's quality for ``target_bytes`` at SVT-AV1 preset ``speed``, from
+    trials (:func:`sequence_trial`): one at :data:`TRIAL_QUALITY`; where the prior slope puts
+    the target more than :data:`TRIAL_REACH` steps away, a second at that quality, and the
+    slope between the two. Returns (quality, its predicted bytes, the nearer trial's bytes
+    and MPSNR)."""
+    lo, hi = QUALITY_RANGE
+    q0 = TRIAL_QUALITY
+    b0, db0 = sequence_trial(frame, prediction, q0, present)
+    b0 *= SPEED_BYTES[speed]
+    q1 = quality_for(b0, q0, target_bytes)
+    if abs(q1 - q0) <= TRIAL_REACH:
+        return q1, b0 * float(np.exp(LOG_SIZE_PER_STEP["av1"] * (q1 - q0))), b0, db0
+    b1, db1 = sequence_trial(frame, prediction, q1, present)
+    b1 *= SPEED_BYTES[speed]
+    slope = float(np.log(max(b1, 1.0) / max(b0, 1.0))) / (q1 - q0)
+    if slope <= 1e-3:
+        slope = LOG_SIZE_PER_STEP["av1"]
+    q = int(np.clip(round(q1 + np.log(max(target_bytes, 1.0) / max(b1, 1.0)) / slope), lo, hi))
+    return q, b1 * float(np.exp(slope * (q - q1))), b1, db1
 
 
 def at_target(db: float, got_bytes: float, target_bytes: float) -> float:
@@ -345,7 +383,6 @@ def model_configuration(frames: np.ndarray, target_bpp: float, fps: float, prese
     centre = f0[c0]
     estimates: list[FamilyEstimate] = []
     context: dict[str, tuple] = {}
-    trial_q = 30
     if not choice.codes_views:
         opts = choice.encoder.hint_options
         header_c = Encoder(quality=50, depth_hint=True, hint_options=opts, gain_grid=gain_grid, preset=effort,
@@ -368,34 +405,30 @@ def model_configuration(frames: np.ndarray, target_bpp: float, fps: float, prese
         context["centre"] = (hdr, pkt)
         q_rc = fit_quality(size_c, RESIDUAL_CENTRE_SHARE * (budget - side), slope, start=q_c)
         hdr_r, pkt_r, pred_r = predicted(q_rc, residual=1)
-        trials = sequence_trials(f0, pred_r, 0.0, trial_q, present)
-        res_bytes = trials["prediction"][0] * SPEED_BYTES[speeds["prediction"]]
         room = budget - side - size_c(q_rc)
-        q_r = quality_for(res_bytes, trial_q, room)
+        q_r, res_bytes, trial_bytes, trial_db = fitted_trial(f0, pred_r, room, speeds["prediction"], present)
         if q_r < RESIDUAL_MIN_QUALITY:
             # the residual cannot shrink to its share (its lowest qualities code little but
             # noise): the centre takes what the residual leaves at that quality, predicted
-            # by the same trial (the warp's error, not the centre's coding, sets its size)
+            # by the same slope (the warp's error, not the centre's coding, sets its size)
+            res_bytes *= float(np.exp(LOG_SIZE_PER_STEP["av1"] * (RESIDUAL_MIN_QUALITY - q_r)))
             q_r = RESIDUAL_MIN_QUALITY
-            need = res_bytes * np.exp(LOG_SIZE_PER_STEP["av1"] * (q_r - trial_q))
-            q_rc = fit_quality(size_c, max(budget - side - need, 1.0), slope, start=q_rc)
+            q_rc = fit_quality(size_c, max(budget - side - res_bytes, 1.0), slope, start=q_rc)
             hdr_r, pkt_r, pred_r = predicted(q_rc, residual=1)
             room = budget - side - size_c(q_rc)
-        got = side + size_c(q_rc) + res_bytes
-        estimates.append(FamilyEstimate("prediction", at_target(trials["prediction"][1], got, budget), q_rc, q_r,
-                                        side + size_c(q_rc) + res_bytes * np.exp(LOG_SIZE_PER_STEP["av1"] * (q_r - trial_q))))
+        estimates.append(FamilyEstimate("prediction", at_target(trial_db, side + size_c(q_rc) + trial_bytes, budget),
+                                        q_rc, q_r, side + size_c(q_rc) + res_bytes))
         context["prediction"] = (hdr_r, pkt_r, pred_r, room)
-        view_trial = trials.get("views")
-    else:  # the prediction fails: the views family alone
-        view_trial = sequence_trials(f0, f0, 0.0, trial_q, present).get("views")
-    if view_trial is not None and all_present:
-        v_bytes = view_trial[0] * SPEED_BYTES[speeds["views"]]
-        q_v = quality_for(v_bytes, trial_q, budget)
-        estimates.append(FamilyEstimate("views", at_target(view_trial[1], v_bytes, budget) + SPEED_DB[speeds["views"]],
-                                        q_v, q_v,
-                                        v_bytes * np.exp(LOG_SIZE_PER_STEP["av1"] * (q_v - trial_q))))
+    if all_present:
+        q_v, v_bytes, trial_bytes, trial_db = fitted_trial(f0, None, budget, speeds["views"], present)
+        estimates.append(FamilyEstimate("views", at_target(trial_db, trial_bytes, budget) + SPEED_DB[speeds["views"]],
+                                        q_v, q_v, v_bytes))
     ranked = sorted(estimates, key=lambda e: -e.db)
     chosen = [ranked[0]] + [e for e in ranked[1:2] if ranked[0].db - e.db < DECIDE_MARGIN_DB]
+    if chosen == [ranked[0]] and ranked[0].family == "centre" and len(ranked) > 1 \
+            and ranked[0].predicted_bytes < (1 - RATE_TOLERANCE_MODEL) * budget:
+        # the centre saturates short of the target: the best sequence family spends the rest
+        chosen.append(ranked[1])
 
     def views_encoder(q: int) -> Encoder:
         return Encoder(quality=int(q), depth_hint=views_hint, hint_options=HintOptions(), gain_grid=gain_grid,
