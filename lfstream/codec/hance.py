@@ -60,7 +60,7 @@ def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarra
     disparity alone), so the warp at strength ``s`` is ``P + s * (R - P)``, with ``P`` and
     ``R`` the warps of ``centre`` and ``restored``, up to the rounding of each to 8 bits. The
     error is then a quadratic in ``s`` per tile, measured from two warps in one pass
-    (:func:`lfstream.codec._kernels.strength_error_terms`) rather than a blend, a warp and an
+    (:func:`lfstream.codec.hance_kernels.strength_error_terms`) rather than a blend, a warp and an
     error pass per level: a fraction of the work, the same decoded light fields within
     0.001 dB (the rounding moves a level only where two are within it).
 
@@ -78,7 +78,7 @@ def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarra
         - views: ``(U, V, H, W, 3)``; centre, restored: ``(H, W, 3)``; disparity: ``(H, W)``
         - output: ``(min(tiles, H), min(tiles, W))`` uint8
     """
-    from lfstream.codec._kernels import strength_error_terms
+    from lfstream.codec.hance_kernels import strength_error_terms
     from lfstream.codec.warp import warp_views
 
     if not 1 <= tiles <= MAX_HANCE_TILES:

@@ -4,7 +4,7 @@ Estimation (the encoder has every view, at encode time): a plane sweep at half r
 (``1 / work_scale``), averaged down to the grid the hint is sent on (``1 / hint_scale``),
 over a sparse set of views — the corners and
 edge mid-points of the grid, the largest baselines — fused into one parallel numba kernel
-(:func:`lfstream.codec._kernels.sweep_cost`) on high-passed luma (vignetting and colour
+(:func:`lfstream.codec.hint_kernels.sweep_cost`) on high-passed luma (vignetting and colour
 shading differ between views and would bias the cost); cost aggregation by a box filter
 (O(1) per pixel); the cheapest candidate per pixel with a parabolic sub-step. The search
 range is the scene's own: a coarse pass at ``1 / coarse_scale`` over ``+-search_limit``
@@ -234,7 +234,7 @@ def sweep_views(u: int, v: int, present: np.ndarray | None = None) -> list[tuple
 
 def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int, kept: bool = False) -> np.ndarray:
     """Luma of the views ``keys`` as means of ``scale x scale`` blocks, in [0, 1]: OpenCV's
-    8-bit grey conversion, then block means (:func:`lfstream.codec._kernels.block_means`;
+    8-bit grey conversion, then block means (:func:`lfstream.codec.hint_kernels.block_means`;
     float, not uint8: block means keep the sub-level precision the sub-pixel fit needs).
     OpenCV converts with SIMD on its threads: the 13 views a 7x7 frame sweeps in 1.9 ms
     (lytro_bikes; translucent 2.4) against 2.2 (3.2) for a numba kernel that converted and
@@ -248,7 +248,7 @@ def _grids(lf: np.ndarray, keys: list[tuple[int, int]], scale: int, kept: bool =
         - lf: ``(U, V, H, W, 3)`` uint8, C-contiguous
         - output: ``(len(keys), max(1, H // scale), max(1, W // scale))`` float32
     """
-    from lfstream.codec._kernels import block_means
+    from lfstream.codec.hint_kernels import block_means
 
     h, w = lf.shape[2:4]
     grey = np.empty((len(keys), h, w), np.uint8)
@@ -313,7 +313,7 @@ def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale:
            max_candidates: int = 128, device: str | None = None) -> np.ndarray:
     """Disparity (px of the full view per view step) at the resolution of ``images``; on a
     CUDA ``device`` the same sweep as tensor operations (:func:`sweeps_on_device`)."""
-    from lfstream.codec._kernels import sweep_cost, winner_subpixel
+    from lfstream.codec.hint_kernels import sweep_cost, winner_subpixel
 
     reach = float(np.abs(offsets).max()) or 1.0
     step = max(options.step * scale / reach, options.min_spacing)  # candidate spacing in full-view px per view step
@@ -390,7 +390,7 @@ def _fit_axes(images: np.ndarray, steps: np.ndarray, scale: int, preset: int,
         preset: OpenCV's DIS preset.
         shading_free: the flows on luma divided by its local mean (:func:`_flows`).
     """
-    from lfstream.codec._kernels import axes_moments, axes_moved, axes_prune, axes_residuals
+    from lfstream.codec.hint_kernels import axes_moments, axes_moved, axes_prune, axes_residuals
 
     identity = np.eye(2, dtype=np.float32)
     _, h, w = images.shape
@@ -456,7 +456,7 @@ def warm_axes_fit() -> None:
     calls them with: a stream's warm-up frame is too small for the detection to reach its
     fit, which would otherwise load them (or compile them, on a fresh install) in the first
     timed frame."""
-    from lfstream.codec._kernels import axes_moments, axes_moved, axes_prune, axes_residuals
+    from lfstream.codec.hint_kernels import axes_moments, axes_moved, axes_prune, axes_residuals
 
     n, views = 32, 2
     flows = np.zeros((n, 2 * views))
@@ -1009,7 +1009,7 @@ def _expand(qh: QuantisedHint, size: tuple[int, int], guide: np.ndarray | None) 
     if guide is None:
         full = _upsample(small, qh.scale, size)
     else:
-        from lfstream.codec._kernels import joint_upsample
+        from lfstream.codec.hint_kernels import joint_upsample
 
         g8 = to_uint8(np.asarray(guide))
         gray = cv2.cvtColor(np.ascontiguousarray(g8), cv2.COLOR_RGB2GRAY) if g8.ndim == 3 else g8

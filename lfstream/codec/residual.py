@@ -372,7 +372,7 @@ def apply_residual(lf: np.ndarray, data: bytes, frame: int | None = None, centre
     Shape:
         - lf: ``(U, V, H, W, 3)`` uint8
     """
-    from lfstream.codec._kernels import add_i420_residual
+    from lfstream.codec.residual_kernels import add_i420_residual
 
     u, v, h, w, _ = lf.shape
     if planes is None:

@@ -73,7 +73,7 @@ def measure_gains(lf: np.ndarray, grid: int = 4, channels: int = 3, present: np.
     gh = max(1, min(grid, len(ys)))
     gw = max(1, min(int(round(grid * w / max(h, 1))), len(xs)))
     scale = np.float32(1 / 255.0) if x.dtype == np.uint8 else np.float32(1.0)
-    from lfstream.codec._kernels import gain_samples
+    from lfstream.codec.gains_kernels import gain_samples
     from lfstream.lightfield import read_only, view_offsets
 
     if disparity is None:
@@ -334,7 +334,7 @@ def apply_gains(lf: np.ndarray, gains: np.ndarray, out: np.ndarray | None = None
     Raises:
         LFShapeError: gains that do not match the views.
     """
-    from lfstream.codec._kernels import apply_view_gains
+    from lfstream.codec.gains_kernels import apply_view_gains
 
     u, v, h, w, c = lf.shape
     gains = check_gain_maps(gains, (u, v), c)

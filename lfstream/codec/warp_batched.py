@@ -1,7 +1,7 @@
 """The decoder's warp (:func:`lfstream.codec.warp.warp_views`) as batched tensor operations
 on any torch device: several frames at once, every view of a chunk in one pass, no per-view
 or per-pixel Python loop. The CPU reference stays the fused numba kernel
-(:func:`lfstream.codec._kernels.warp_all_views`); this is the same arithmetic written for a
+(:func:`lfstream.codec.warp_kernels.warp_all_views`); this is the same arithmetic written for a
 GPU, checked against it on the CPU (tests/codec/test_warp_batched.py).
 
 The same steps and numbers as the kernel: the centre disparity forward-splatted into each
@@ -38,7 +38,7 @@ DEFAULT_CHUNK_PIXELS = 1 << 25
 
 
 def _floor_int(t: torch.Tensor, offset: float) -> torch.Tensor:
-    """floor(t) as the kernel computes it (:func:`lfstream.codec._kernels._floor_int`): the
+    """floor(t) as the kernel computes it (:func:`lfstream.codec.warp_kernels._floor_int`): the
     truncation of ``t + offset`` in float32, clamped the same way."""
     return (t.clamp(1.0 - offset, 1.0e9) + offset).to(torch.int32) - int(offset)  # a float32 sum
 
@@ -74,7 +74,7 @@ def _splat(d: torch.Tensor, du: torch.Tensor, dv: torch.Tensor) -> torch.Tensor:
 
 def _row_fold_bounds(d: torch.Tensor) -> torch.Tensor:
     """Per frame and row ``(rx, ry)`` of the centre maps ``d`` (B, 1, H, W), as
-    :func:`lfstream.codec._kernels.row_fold_bounds` computes them (the same float32
+    :func:`lfstream.codec.splat_kernels.row_fold_bounds` computes them (the same float32
     operations, each rounded once, so the same values; ``ry`` of the last row 0).
 
     Shape:
@@ -148,7 +148,7 @@ def _fill_holes(maps: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
     """Every hole of the splatted ``maps`` (B, n, H, W) takes its nearest splatted neighbour
     in the row on the background side (the smaller disparity; the left one on a tie), the
     one neighbour a run at the row's end has, or the centre map ``d`` (B, 1, H, W) where the
-    row has none (:func:`lfstream.codec._kernels._fill_holes`)."""
+    row has none (:func:`lfstream.codec.warp_kernels._fill_holes`)."""
     w = maps.shape[-1]
     hole = maps <= _HOLE_TEST
     pos = torch.arange(w, device=maps.device, dtype=torch.int64).expand_as(maps)
@@ -166,7 +166,7 @@ def _fill_holes(maps: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
 def _bilinear(src: torch.Tensor, idx: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor, stride: int) -> torch.Tensor:
     """Bilinear samples of the padded views ``src`` (B, C, (H + 2) * (W + 2)) int32 at the
     top-left taps ``idx`` (B, 1, N) int64 with 1/1024-pixel fractions ``fx, fy`` (B, 1, N...)
-    int32, as the kernel computes them (:func:`lfstream.codec._kernels._sample_at`):
+    int32, as the kernel computes them (:func:`lfstream.codec.warp_kernels._sample_at`):
     each row's pair rounded to 8 x the value, then the rows blended.
 
     Shape:

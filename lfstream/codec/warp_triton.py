@@ -17,7 +17,7 @@ The per-pixel kernel does a view pixel's whole chain in registers: the view's di
 1/1024-pixel fixed point, the four taps of the replicate-padded centre view, the
 fixed-point bilinear blend, the shading gain up-sampled from its grid with OpenCV's
 INTER_LINEAR taps, and the uint8 store. Same arithmetic as the CPU kernel
-(:func:`lfstream.codec._kernels.warp_all_views`) and the torch path; floating-point
+(:func:`lfstream.codec.warp_kernels.warp_all_views`) and the torch path; floating-point
 contraction is off, so each operation rounds where the torch path rounds (fused
 multiply-adds only where the kernel has them). Checked on the H100 against the torch path
 and the CPU kernel (tests/codec/test_warp_batched.py: within a level, as the tests bound

@@ -47,7 +47,9 @@ def warmup_lf() -> np.ndarray:
 
 #: The modules whose numba kernels a stream compiles: their source stamps key the marker
 #: that says they were compiled here before (:func:`_compiled_marker`).
-KERNEL_MODULES = ("codec/_kernels.py", "codec/_entropy.py", "refocus/_kernels.py", "_kernels.py")
+KERNEL_MODULES = ("codec/_numba.py", "codec/warp_kernels.py", "codec/splat_kernels.py", "codec/hint_kernels.py",
+                  "codec/gains_kernels.py", "codec/residual_kernels.py", "codec/hance_kernels.py", "codec/_entropy.py",
+                  "refocus/_kernels.py", "_kernels.py")
 
 
 def _compiled_marker() -> Path | None:

@@ -205,7 +205,7 @@ def test_the_default_encode_marks_its_jpeg_frames_and_the_option_is_checked(clip
 
 
 def test_the_strength_terms_kernel_equals_numpy_over_the_views_present(rng):
-    from lfstream.codec._kernels import strength_error_terms
+    from lfstream.codec.hance_kernels import strength_error_terms
 
     plain, restored, ref = rng.integers(0, 256, (3, 3, 4, 9, 11, 3), dtype=np.uint8)
     present = rng.random((3, 4)) < 0.6

@@ -10,9 +10,9 @@ import torch
 import lfstream
 import lfstream.codec.hint as hint_mod
 from lfstream.cli import main
-from lfstream.codec._kernels import sweep_cost, winner_subpixel
 from lfstream.codec.encoder import Encoder
 from lfstream.codec.hint import HintOptions, estimate_hint_map
+from lfstream.codec.hint_kernels import sweep_cost, winner_subpixel
 from lfstream.codec.sweep_batched import box_mean, sweep_batched, sweep_cost_batched, winner_subpixel_batched
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.metrics import mpsnr

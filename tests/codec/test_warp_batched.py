@@ -8,8 +8,8 @@ import pytest
 import torch
 
 import lfstream
-from lfstream.codec._kernels import fold_bounds, row_fold_bounds
 from lfstream.codec.decoder import Decoder, iter_decode
+from lfstream.codec.splat_kernels import fold_bounds, row_fold_bounds
 from lfstream.codec.warp import splat_rows, splat_views, view_disparities, warp_views, warp_views_per_view
 from lfstream.codec.warp_batched import _row_fold_bounds, _splat_rows, _window_max, warp_views_batched
 from lfstream.errors import LFShapeError, LFValueError

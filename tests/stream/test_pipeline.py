@@ -477,7 +477,9 @@ def test_warm_up_loads_every_kernel_the_stream_calls(monkeypatch, read_only):
     import lfstream.stream.warmup as warmup
 
     calls: list[tuple[str, tuple]] = []
-    for name in ("lfstream._kernels", "lfstream.codec._kernels", "lfstream.refocus._kernels"):
+    for name in ("lfstream._kernels", "lfstream.codec.warp_kernels", "lfstream.codec.splat_kernels",
+                 "lfstream.codec.hint_kernels", "lfstream.codec.gains_kernels", "lfstream.codec.residual_kernels",
+                 "lfstream.codec.hance_kernels", "lfstream.refocus._kernels"):
         module = importlib.import_module(name)
         for attr, fn in list(vars(module).items()):
             if isinstance(fn, numba.core.registry.CPUDispatcher):
@@ -649,7 +651,7 @@ def test_the_child_compiles_the_warp_and_focal_stack_the_stream_calls(monkeypatc
     import lfstream.stream.warmup as warmup
 
     calls: list[tuple[str, tuple]] = []
-    for name, attr in (("lfstream.codec._kernels", "warp_all_views"), ("lfstream.refocus._kernels", "shift_sum_separable")):
+    for name, attr in (("lfstream.codec.warp_kernels", "warp_all_views"), ("lfstream.refocus._kernels", "shift_sum_separable")):
         module = importlib.import_module(name)
         fn = getattr(module, attr)
 
