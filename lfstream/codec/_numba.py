@@ -50,7 +50,7 @@ _NO_REASSOC = dict(fastmath={"nnan", "ninf", "nsz", "arcp", "contract", "afn"}, 
 _NO_REASSOC_BORROWED = dict(_NO_REASSOC, **_BORROW)  # (see _ROW_BORROWED)
 
 
-# The view axes' fit (lfstream.codec.hint._fit_axes) on a few thousand flow samples. Its
+# The view axes' fit (lfstream.codec.hint.axes._fit_axes) on a few thousand flow samples. Its
 # numpy version made about sixty calls on small arrays, on the lane whose end the hint waits
 # for; these kernels give the same axes to the bit (tests/codec/test_hint.py). Samples are rows
 # of ``flows``: ``(dy_0, dx_0, dy_1, dx_1, ...)``, one pair per view. fastmath lets the

@@ -1,7 +1,7 @@
-"""The encoder's plane sweep (:func:`lfstream.codec.hint._sweep`) as tensor operations on
+"""The encoder's plane sweep (:func:`lfstream.codec.hint.sweep._sweep`) as tensor operations on
 any torch device: every candidate plane and every view in one pass, no per-plane or per-row
 Python loop. The CPU reference stays the fused numba kernels
-(:func:`lfstream.codec.hint_kernels.sweep_cost`, :func:`~lfstream.codec.hint_kernels.winner_subpixel`)
+(:func:`lfstream.codec.hint.kernels.sweep_cost`, :func:`~lfstream.codec.hint.kernels.winner_subpixel`)
 and OpenCV's box filter; this is the same arithmetic written for a GPU, checked against them
 on the CPU (tests/codec/test_sweep_batched.py).
 
@@ -43,7 +43,7 @@ def _taps(n: int, pos: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.
 def sweep_cost_batched(images: torch.Tensor, offsets: torch.Tensor, shifts: torch.Tensor,
                        chunk_pixels: int = DEFAULT_CHUNK_PIXELS) -> torch.Tensor:
     """Plane-sweep matching cost of a centre image against shifted views, as
-    :func:`lfstream.codec.hint_kernels.sweep_cost` computes it.
+    :func:`lfstream.codec.hint.kernels.sweep_cost` computes it.
 
     ``cost[k, y, x] = mean_j |I_j(y - s_k * du_j, x - s_k * dv_j) - I_0(y, x)|``, view ``j``
     sampled bilinearly with the border replicated.
@@ -104,7 +104,7 @@ def sweep_cost_batched(images: torch.Tensor, offsets: torch.Tensor, shifts: torc
 
 def box_mean(cost: torch.Tensor, radius: int) -> torch.Tensor:
     """Each plane's ``(2r + 1)^2`` box mean with the border replicated (OpenCV's ``blur``
-    with ``BORDER_REPLICATE``, as :func:`lfstream.codec.hint._sweep` aggregates).
+    with ``BORDER_REPLICATE``, as :func:`lfstream.codec.hint.sweep._sweep` aggregates).
 
     Shape:
         - cost: ``(D, h, w)``; output the same
@@ -118,7 +118,7 @@ def box_mean(cost: torch.Tensor, radius: int) -> torch.Tensor:
 
 def winner_subpixel_batched(cost: torch.Tensor, shifts: torch.Tensor) -> torch.Tensor:
     """Per pixel the cheapest candidate (the first of equal ones), refined by a parabola
-    through its neighbours, as :func:`lfstream.codec.hint_kernels.winner_subpixel`.
+    through its neighbours, as :func:`lfstream.codec.hint.kernels.winner_subpixel`.
 
     Shape:
         - cost: ``(D, h, w)`` float32, D >= 3; shifts: ``(D,)`` evenly spaced
@@ -143,7 +143,7 @@ def winner_subpixel_batched(cost: torch.Tensor, shifts: torch.Tensor) -> torch.T
 def sweep_batched(images: np.ndarray, offsets: np.ndarray, candidates: np.ndarray, scale: int, radius: int,
                   device: str | torch.device) -> np.ndarray:
     """The whole sweep (cost, box mean, winner) on ``device``, what
-    :func:`lfstream.codec.hint._sweep` does with the kernels: ``candidates`` are disparities
+    :func:`lfstream.codec.hint.sweep._sweep` does with the kernels: ``candidates`` are disparities
     in pixels of the full view per view step, ``images`` are at ``1 / scale``.
 
     Shape:

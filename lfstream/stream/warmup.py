@@ -47,7 +47,7 @@ def warmup_lf() -> np.ndarray:
 
 #: The modules whose numba kernels a stream compiles: their source stamps key the marker
 #: that says they were compiled here before (:func:`_compiled_marker`).
-KERNEL_MODULES = ("codec/_numba.py", "codec/warp_kernels.py", "codec/splat_kernels.py", "codec/hint_kernels.py",
+KERNEL_MODULES = ("codec/_numba.py", "codec/warp_kernels.py", "codec/splat_kernels.py", "codec/hint/kernels.py",
                   "codec/gains_kernels.py", "codec/residual_kernels.py", "codec/hance_kernels.py", "codec/_entropy.py",
                   "refocus/_kernels.py", "_kernels.py")
 

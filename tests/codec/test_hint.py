@@ -9,7 +9,7 @@ import pytest
 import zstandard
 
 from lfstream.codec import hint as H
-from lfstream.codec.hint_kernels import joint_upsample, sweep_cost, winner_subpixel
+from lfstream.codec.hint.kernels import joint_upsample, sweep_cost, winner_subpixel
 from lfstream.errors import BitstreamError, LFValueError
 from lfstream.synth import fronto_parallel_plane, synth_clip
 
@@ -29,7 +29,7 @@ def _bilinear(img, y, x):
 def test_grey_block_means_equal_opencvs_conversion_and_area_resampling(rng):
     import cv2
 
-    from lfstream.codec.hint_kernels import block_means
+    from lfstream.codec.hint.kernels import block_means
 
     # blocks of one pixel: every 8-bit level divided by 255, as the float conversion does
     levels = np.arange(256, dtype=np.uint8).reshape(1, 16, 16)
@@ -85,7 +85,7 @@ def test_the_on_axis_spans_equal_the_general_span_to_the_bit(rng):
     """A view on the centre's row (vertical weight 0) or column (horizontal weight 0) takes
     a span with one interpolation; its costs must equal the general span's bit for bit,
     or the hint's bytes change."""
-    from lfstream.codec.hint_kernels import _sweep_span, _sweep_span_col, _sweep_span_row
+    from lfstream.codec.hint.kernels import _sweep_span, _sweep_span_col, _sweep_span_row
 
     w = 301
     r0, r1, centre, acc = (rng.standard_normal(w).astype(np.float32) for _ in range(4))
@@ -242,7 +242,7 @@ def test_the_working_sweeps_candidates_are_at_least_min_spacing_apart(monkeypatc
     """Candidates step the outermost view's shift by ``step`` working pixels, but never
     closer than ``min_spacing`` px per view step: on 7x7 grids the floor binds (1/6 px by
     ``step`` alone), on 5x5 and 3x3 it does not; ``min_spacing=0`` is ``step`` alone."""
-    from lfstream.codec import hint_kernels as _kernels
+    from lfstream.codec.hint import kernels as _kernels
 
     seen = []
     real = _kernels.sweep_cost
@@ -438,7 +438,7 @@ def test_bad_view_axes_in_a_payload_are_bitstream_errors(bad):
 
 
 def test_the_axes_fits_kernels_agree_with_numpy(rng):
-    from lfstream.codec.hint_kernels import axes_moments, axes_moved, axes_prune, axes_residuals
+    from lfstream.codec.hint.kernels import axes_moments, axes_moved, axes_prune, axes_residuals
 
     n, m = 1500, 8
     flows = rng.normal(size=(n, m))

@@ -9,10 +9,11 @@ import torch
 
 import lfstream
 import lfstream.codec.hint as hint_mod
+import lfstream.codec.hint.sweep as hint_sweep
 from lfstream.cli import main
 from lfstream.codec.encoder import Encoder
 from lfstream.codec.hint import HintOptions, estimate_hint_map
-from lfstream.codec.hint_kernels import sweep_cost, winner_subpixel
+from lfstream.codec.hint.kernels import sweep_cost, winner_subpixel
 from lfstream.codec.sweep_batched import box_mean, sweep_batched, sweep_cost_batched, winner_subpixel_batched
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.metrics import mpsnr
@@ -92,7 +93,7 @@ def test_the_encoder_sweeps_on_the_device(monkeypatch):
     clip = synth_clip(2, 5, (48, 64), seed=7, noise=1.0, motion=0.4)
     ref_map = estimate_hint_map(clip.lf[0])
     ref = lfstream.encode(clip.lf)
-    monkeypatch.setattr(hint_mod, "sweeps_on_device", lambda device: True)
+    monkeypatch.setattr(hint_sweep, "sweeps_on_device", lambda device: True)
     got_map = estimate_hint_map(clip.lf[0], device="cpu")
     assert got_map.search == pytest.approx(ref_map.search, abs=1e-3)
     assert np.mean(np.abs(got_map.disparity - ref_map.disparity) <= 1e-3) >= 0.99

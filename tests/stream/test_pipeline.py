@@ -478,7 +478,7 @@ def test_warm_up_loads_every_kernel_the_stream_calls(monkeypatch, read_only):
 
     calls: list[tuple[str, tuple]] = []
     for name in ("lfstream._kernels", "lfstream.codec.warp_kernels", "lfstream.codec.splat_kernels",
-                 "lfstream.codec.hint_kernels", "lfstream.codec.gains_kernels", "lfstream.codec.residual_kernels",
+                 "lfstream.codec.hint.kernels", "lfstream.codec.gains_kernels", "lfstream.codec.residual_kernels",
                  "lfstream.codec.hance_kernels", "lfstream.refocus._kernels"):
         module = importlib.import_module(name)
         for attr, fn in list(vars(module).items()):
