@@ -61,7 +61,7 @@ class CentreCoding:
         """What the stream header records (the decoder needs only the codec id)."""
         if self.codec == "jpeg":
             return {"codec": "jpeg", "quality": int(quality)}
-        return {"codec": "av1", "quality": int(quality), "crf": av1_crf(quality), "svt_preset": int(self.speed)}
+        return {"codec": "av1", "quality": int(quality), "crf": svt_crf(quality, self.speed), "svt_preset": int(self.speed)}
 
 
 def av1_crf(quality: int) -> int:
@@ -70,6 +70,19 @@ def av1_crf(quality: int) -> int:
     if not lo <= quality <= hi:
         raise LFValueError(f"quality: an integer in {lo}..{hi}, got {quality!r}")
     return int(round(63 - (quality - 1) * 62 / 99))
+
+
+#: SVT-AV1's fastest presets (this one up) at CRF 1 write sequences dav1d refuses as invalid
+#: data on real views (seahorse's, presets 11-13, quality 100; CRF 2 and presets up to 10
+#: decode): their lowest CRF is 2.
+SVT_CRF1_BROKEN_FROM = 11
+
+
+def svt_crf(quality: int, speed: int) -> int:
+    """The CRF SVT-AV1 is given for ``quality`` at preset ``speed`` (:func:`av1_crf`, at least
+    2 from :data:`SVT_CRF1_BROKEN_FROM` up)."""
+    crf = av1_crf(quality)
+    return max(crf, 2) if speed >= SVT_CRF1_BROKEN_FROM else crf
 
 
 def rgb_to_i420(img: np.ndarray) -> np.ndarray:
@@ -164,7 +177,7 @@ def svtav1_encoder(size: tuple[int, int], quality: int, speed: int, gop: int | N
     ctx.height, ctx.width = size
     ctx.pix_fmt = "yuv420p"
     ctx.time_base = Fraction(1, 25)
-    options = {"preset": str(int(speed)), "crf": str(av1_crf(quality)), **svt_options()}
+    options = {"preset": str(int(speed)), "crf": str(svt_crf(quality, speed)), **svt_options()}
     if gop is not None:
         options["g"] = str(int(gop))
     ctx.options = options
@@ -255,6 +268,6 @@ def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int 
 
 
 __all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "AV1_MIN_SIZE", "AV1_MIN_VIEW", "av1_fits",
-           "CentreCoding", "av1_crf", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
+           "CentreCoding", "av1_crf", "svt_crf", "SVT_CRF1_BROKEN_FROM", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
            "svtav1_encoder", "quiet_svt_log", "svt_options", "SVT_X86_ASM",
            "AV1_THREADED_MIN_PIXELS", "encode_av1", "decode_av1", "max_av1_pixels", "encode_centre", "decode_centre"]

@@ -450,3 +450,19 @@ def test_a_residual_stream_decodes_into_the_video_array_as_frame_by_frame(coded)
 
     apart = [f.lf for f in iter_decode(io.BytesIO(coded))]
     np.testing.assert_array_equal(decode(coded), np.stack(apart))
+
+
+@pytest.mark.parametrize("speed", [11, 12, 13])
+def test_the_fastest_presets_at_quality_100_write_sequences_that_decode(speed):
+    """SVT-AV1 presets 11-13 at CRF 1 wrote sequences of real views that dav1d refused
+    (seahorse's centre 3x3 at quality 100, views and prediction residuals alike): those
+    presets' lowest CRF is 2 (lfstream.codec.intra.svt_crf)."""
+    import lfstream
+    from lfstream.codec.intra import svt_crf
+    from lfstream.codec.residual import decode_residual, encode_residual
+    from tests.conftest import shared
+
+    lf = np.ascontiguousarray(lfstream.read_lf(shared("seahorse5x5", "camImagesFlat"))[1:4, 1:4])
+    planes = decode_residual(encode_residual(lf, None, 100, speed), (3, 3), lf.shape[2:4])
+    assert planes.shape[0] == 8
+    assert svt_crf(100, speed) == 2 and svt_crf(100, 10) == 1 and svt_crf(50, speed) == svt_crf(50, 4)
