@@ -72,17 +72,19 @@ def av1_crf(quality: int) -> int:
     return int(round(63 - (quality - 1) * 62 / 99))
 
 
-#: SVT-AV1's fastest presets (this one up) at CRF 1 write sequences dav1d refuses as invalid
-#: data on real views (seahorse's, presets 11-13, quality 100; CRF 2 and presets up to 10
-#: decode): their lowest CRF is 2.
-SVT_CRF1_BROKEN_FROM = 11
+#: SVT-AV1's fastest presets (this one up) at CRF 1-4 write sequences dav1d refuses as
+#: invalid data on real views (seahorse's views, keyed views and prediction residuals,
+#: presets 11-13, qualities 95-100; CRF 5 and presets up to 10 decoded): those presets'
+#: lowest CRF is :data:`SVT_FAST_MIN_CRF`, a step of margin above the lowest that decoded.
+SVT_CRF_FLOOR_FROM = 11
+SVT_FAST_MIN_CRF = 6
 
 
 def svt_crf(quality: int, speed: int) -> int:
     """The CRF SVT-AV1 is given for ``quality`` at preset ``speed`` (:func:`av1_crf`, at least
-    2 from :data:`SVT_CRF1_BROKEN_FROM` up)."""
+    :data:`SVT_FAST_MIN_CRF` from preset :data:`SVT_CRF_FLOOR_FROM` up)."""
     crf = av1_crf(quality)
-    return max(crf, 2) if speed >= SVT_CRF1_BROKEN_FROM else crf
+    return max(crf, SVT_FAST_MIN_CRF) if speed >= SVT_CRF_FLOOR_FROM else crf
 
 
 def rgb_to_i420(img: np.ndarray) -> np.ndarray:
@@ -268,6 +270,7 @@ def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int 
 
 
 __all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "AV1_MIN_SIZE", "AV1_MIN_VIEW", "av1_fits",
-           "CentreCoding", "av1_crf", "svt_crf", "SVT_CRF1_BROKEN_FROM", "rgb_to_i420", "i420_to_rgb", "pad_to_even",
+           "CentreCoding", "av1_crf", "svt_crf", "SVT_CRF_FLOOR_FROM", "SVT_FAST_MIN_CRF",
+           "rgb_to_i420", "i420_to_rgb", "pad_to_even",
            "svtav1_encoder", "quiet_svt_log", "svt_options", "SVT_X86_ASM",
            "AV1_THREADED_MIN_PIXELS", "encode_av1", "decode_av1", "max_av1_pixels", "encode_centre", "decode_centre"]

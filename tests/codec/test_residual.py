@@ -454,15 +454,19 @@ def test_a_residual_stream_decodes_into_the_video_array_as_frame_by_frame(coded)
 
 @pytest.mark.parametrize("speed", [11, 12, 13])
 def test_the_fastest_presets_at_quality_100_write_sequences_that_decode(speed):
-    """SVT-AV1 presets 11-13 at CRF 1 wrote sequences of real views that dav1d refused
-    (seahorse's centre 3x3 at quality 100, views and prediction residuals alike): those
-    presets' lowest CRF is 2 (lfstream.codec.intra.svt_crf)."""
+    """SVT-AV1 presets 11-13 at CRF 1-4 wrote sequences of real views that dav1d refused
+    (seahorse's views, keyed views and prediction residuals at qualities 95-100): those
+    presets' lowest CRF is raised (lfstream.codec.intra.svt_crf)."""
     import lfstream
-    from lfstream.codec.intra import svt_crf
-    from lfstream.codec.residual import decode_residual, encode_residual
+    from lfstream.codec.intra import SVT_FAST_MIN_CRF, svt_crf
+    from lfstream.codec.residual import decode_residual, encode_residual, encode_views_keyed
     from tests.conftest import shared
 
     lf = np.ascontiguousarray(lfstream.read_lf(shared("seahorse5x5", "camImagesFlat"))[1:4, 1:4])
-    planes = decode_residual(encode_residual(lf, None, 100, speed), (3, 3), lf.shape[2:4])
-    assert planes.shape[0] == 8
-    assert svt_crf(100, speed) == 2 and svt_crf(100, 10) == 1 and svt_crf(50, speed) == svt_crf(50, 4)
+    prediction = np.ascontiguousarray(np.repeat(np.repeat(lf[1:2, 1:2], 3, 0), 3, 1))
+    for q in (95, 98, 100):
+        for residual in (encode_residual(lf, None, q, speed), encode_residual(lf, prediction, q, speed)):
+            assert decode_residual(residual, (3, 3), lf.shape[2:4]).shape[0] == 8
+        key, rest = encode_views_keyed(lf, q, speed)
+        assert decode_residual(rest, (3, 3), lf.shape[2:4], centre=key).shape[0] == 8
+    assert svt_crf(100, speed) == SVT_FAST_MIN_CRF and svt_crf(100, 10) == 1 and svt_crf(50, speed) == svt_crf(50, 4)
