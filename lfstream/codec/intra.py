@@ -241,16 +241,18 @@ def decode_av1(data: bytes, size: tuple[int, int], frame: int | None = None) -> 
             failure = f"centre view's AV1 frame is larger than the header says ({h}x{w})"
         else:
             failure = f"centre view is not a decodable AV1 frame ({exc})"
+    if failure is None and len(frames) != 1:
+        failure = f"centre view holds {len(frames)} AV1 frames, expected 1"
+    elif failure is None and (frames[0].format.name != "yuv420p"
+                              or (frames[0].height, frames[0].width) != (h + h % 2, w + w % 2)):
+        failure = f"centre view is {frames[0].height}x{frames[0].width} {frames[0].format.name}, header says {h}x{w}"
     if failure is not None:
-        # raised outside the handler, unchained: PyAV's error would keep this frame and its
-        # decoder alive as long as the caller keeps ours (lfstream.codec.residual's note)
+        # raised outside the handler, unchained, the decoder and its frames freed first: an
+        # error raised beside them would keep them alive as long as the caller keeps it
+        # (lfstream.codec.residual's note)
+        ctx = frames = None
         raise BitstreamError(failure, frame)
-    if len(frames) != 1:
-        raise BitstreamError(f"centre view holds {len(frames)} AV1 frames, expected 1", frame)
-    f = frames[0]
-    if f.format.name != "yuv420p" or (f.height, f.width) != (h + h % 2, w + w % 2):
-        raise BitstreamError(f"centre view is {f.height}x{f.width} {f.format.name}, header says {h}x{w}", frame)
-    return i420_to_rgb(f.to_ndarray(format="yuv420p"))[:h, :w]
+    return i420_to_rgb(frames[0].to_ndarray(format="yuv420p"))[:h, :w]
 
 
 def encode_centre(img: np.ndarray, quality: int, coding: CentreCoding) -> bytes:

@@ -327,19 +327,20 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
     except BaseException:  # Ctrl-C, a deadline: drained as well
         _drain(ctx)
         raise
+    if failure is None and len(decoded) != count + lead:
+        failure = f"residual holds {len(decoded) - lead} AV1 frames, expected {count}"
+    bad = [f for f in decoded[lead:] if f.format.name != "yuv420p" or (f.height, f.width) != (h + h % 2, w + w % 2)]
+    if failure is None and bad:
+        failure = f"residual frame is {bad[0].height}x{bad[0].width} {bad[0].format.name}, header says {h}x{w}"
     if failure is not None:
         # the decoder and its frames freed here, on the thread that made them, before the
-        # error leaves: an error chained to PyAV's kept this frame (and through it the
+        # error leaves: an error raised beside them kept this frame (and through it the
         # dav1d context) alive until the caller dropped it, often on another thread, and a
         # long run of hostile streams grew the process's memory by kilobytes a stream
-        del ctx, decoded
+        del ctx, decoded, bad
         raise BitstreamError(failure, frame)
-    if len(decoded) != count + lead:
-        raise BitstreamError(f"residual holds {len(decoded) - lead} AV1 frames, expected {count}", frame)
     planes = np.empty((count, (h + h % 2) * 3 // 2, w + w % 2), np.uint8)
     for k, f in enumerate(decoded[lead:]):
-        if f.format.name != "yuv420p" or (f.height, f.width) != (h + h % 2, w + w % 2):
-            raise BitstreamError(f"residual frame is {f.height}x{f.width} {f.format.name}, header says {h}x{w}", frame)
         _copy_i420(f, planes[k])
     return planes
 

@@ -93,17 +93,25 @@ def test_a_frame_that_fails_leaves_no_residual_decode_behind(monkeypatch):
         assert jobs and all(j.done() for j in jobs)
 
 
-def test_a_residual_that_fails_keeps_no_decoder_alive_through_its_error():
-    """The finding kept as regression-leak-residual-error: a residual dav1d refuses mid-sequence.
-    The error chained to PyAV's kept decode_residual's frame, and with it the dav1d context,
-    alive as long as the caller kept the error (kilobytes a stream on a long run); it is
-    raised unchained, outside the handler."""
+@pytest.mark.parametrize("case, message", [("regression-leak-residual-error", "not a decodable AV1 sequence"),
+                                           ("regression-leak-residual-frame-size", "header says")])
+def test_a_residual_that_fails_keeps_no_decoder_alive_through_its_error(case, message):
+    """The findings kept as regression-leak-residual-*: a residual dav1d refuses mid-sequence,
+    and one whose decoded frames are not the header's size. The error, chained to PyAV's or
+    raised beside the decoder, kept decode_residual's frame (and with it the dav1d context
+    and the frames) alive as long as the caller kept the error: kilobytes a stream over a long
+    run. It is raised unchained, after they are freed."""
     from lfstream.codec.bitstream import split_stream
     from lfstream.codec.residual import decode_residual
     from lfstream.errors import BitstreamError
 
-    header, packets = split_stream(fuzz_decoder.repair_crcs((CORPUS / "regression-leak-residual-error").read_bytes()[1:]))
+    header, packets = split_stream(fuzz_decoder.repair_crcs((CORPUS / case).read_bytes()[1:]))
     p = next(p for p in packets if p.residual)
-    with pytest.raises(BitstreamError, match="not a decodable AV1 sequence") as info:
+    with pytest.raises(BitstreamError, match=message) as info:
         decode_residual(p.residual, header.views, header.size, p.seq, p.image)
     assert info.value.__cause__ is None and info.value.__context__ is None
+    tb = info.value.__traceback__
+    while tb is not None:  # the frame the error was raised in holds neither the decoder nor frames
+        if tb.tb_frame.f_code.co_name == "decode_residual":
+            assert not {"ctx", "decoded"} & set(tb.tb_frame.f_locals), set(tb.tb_frame.f_locals)
+        tb = tb.tb_next
