@@ -43,7 +43,7 @@ import numpy as np
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_header
 from lfstream.codec.encoder import Encoder, preset_coding
 from lfstream.codec.hint import HintOptions
-from lfstream.codec.intra import av1_fits, decode_centre, encode_centre
+from lfstream.codec.intra import av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.rate.common import (
     FOLLOW_MAX_STEP,
@@ -298,7 +298,6 @@ def with_centre(header: StreamHeader, packet: Packet, quality: int, image: bytes
     """``header`` and ``packet`` with the centre view coded at ``quality`` in ``coding``."""
     meta = {**header.meta, "quality": int(quality)}
     if coding.codec != "jpeg":
-        meta["preset"] = header.meta.get("preset")
         meta["centre"] = coding.as_meta(quality)
     return replace(header, quality=int(quality), meta=meta), replace(packet, image=image)
 
@@ -313,13 +312,6 @@ def centre_sizes(centre: np.ndarray, coding):
         return len(cache[q])
 
     return size, cache
-
-
-def decoded_centre_db(centre: np.ndarray, payload: bytes, coding) -> float:
-    """PSNR (dB) of one coded centre view."""
-    dec = decode_centre(payload, coding.codec_id, centre.shape[:2])
-    mse = float(np.mean((dec.astype(np.float32) - centre.astype(np.float32)) ** 2))
-    return float(min(10.0 * np.log10(255.0**2 / max(mse, 1e-10)), 100.0))
 
 
 def frame_budget(target_bpp: float, frame: np.ndarray) -> float:
