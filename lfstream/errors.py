@@ -46,7 +46,7 @@ class BitstreamError(LFValueError):
 
 class EncoderStalledError(LFStreamError):
     """A third-party encoder (SVT-AV1, x265) did not return within its deadline on every
-    attempt (:mod:`lfstream.codec.watchdog`)."""
+    attempt (:mod:`lfstream.codec.deadline`)."""
 
 
 class WeightsError(LFFileError):

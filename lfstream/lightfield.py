@@ -274,11 +274,7 @@ def to_sensor(lf: ArrayT) -> ArrayT:
         - lf: ``(*, U, V, H, W, C)``
         - output: ``(*, H*U, W*V, C)``
     """
-    u, v, h, w, c = lf_dims(lf)
-    lead = tuple(lf.shape[:-5])
-    n = len(lead)
-    axes = tuple(range(n)) + (n + 2, n + 0, n + 3, n + 1, n + 4)
-    return _permute(lf, axes).reshape(*lead, h * u, w * v, c)
+    return _tile(lf, (2, 0, 3, 1, 4))
 
 
 def from_sensor(img: ArrayT, views: int | tuple[int, int]) -> ArrayT:
@@ -288,17 +284,7 @@ def from_sensor(img: ArrayT, views: int | tuple[int, int]) -> ArrayT:
         - img: ``(*, H*U, W*V, C)``
         - output: ``(*, U, V, H, W, C)``
     """
-    u, v = (views, views) if isinstance(views, (int, np.integer)) else views
-    if img.ndim < 3:
-        raise LFShapeError(f"sensor image: expected (..., H, W, C), got shape {tuple(img.shape)}")
-    sh, sw, c = (int(s) for s in img.shape[-3:])
-    if u < 1 or v < 1 or sh % u or sw % v:
-        raise LFShapeError(f"sensor image: size {sh}x{sw} is not a multiple of the angular size {u}x{v}")
-    lead = tuple(img.shape[:-3])
-    n = len(lead)
-    x = img.reshape(*lead, sh // u, u, sw // v, v, c)
-    axes = tuple(range(n)) + (n + 1, n + 3, n + 0, n + 2, n + 4)
-    return _permute(x, axes)
+    return _untile(img, views, lenslet=True)
 
 
 def to_mosaic(lf: ArrayT) -> ArrayT:
@@ -308,11 +294,38 @@ def to_mosaic(lf: ArrayT) -> ArrayT:
         - lf: ``(*, U, V, H, W, C)``
         - output: ``(*, U*H, V*W, C)``
     """
+    return _tile(lf, (0, 2, 1, 3, 4))
+
+
+def _tile(lf: ArrayT, order: tuple[int, ...]) -> ArrayT:
+    """``lf`` (*, U, V, H, W, C) permuted by ``order`` (of its last five axes) and the pairs
+    of axes then folded into the rows and columns of one image (*, U*H, V*W, C)."""
     u, v, h, w, c = lf_dims(lf)
     lead = tuple(lf.shape[:-5])
     n = len(lead)
-    axes = tuple(range(n)) + (n + 0, n + 2, n + 1, n + 3, n + 4)
+    axes = tuple(range(n)) + tuple(n + k for k in order)
     return _permute(lf, axes).reshape(*lead, u * h, v * w, c)
+
+
+def _untile(img: ArrayT, views: int | tuple[int, int], lenslet: bool) -> ArrayT:
+    """The inverse of :func:`_tile`: a sensor image (``lenslet``: the views interleaved
+    under each microlens) or a mosaic (views side by side) to (*, U, V, H, W, C)."""
+    what, grid = ("sensor image", "angular size") if lenslet else ("mosaic", "view grid")
+    u, v = (views, views) if isinstance(views, (int, np.integer)) else views
+    if img.ndim < 3:
+        raise LFShapeError(f"{what}: expected (..., H, W, C), got shape {tuple(img.shape)}")
+    ih, iw, c = (int(s) for s in img.shape[-3:])
+    if u < 1 or v < 1 or ih % u or iw % v:
+        raise LFShapeError(f"{what}: size {ih}x{iw} is not a multiple of the {grid} {u}x{v}")
+    lead = tuple(img.shape[:-3])
+    n = len(lead)
+    if lenslet:
+        x = img.reshape(*lead, ih // u, u, iw // v, v, c)
+        order = (1, 3, 0, 2, 4)
+    else:
+        x = img.reshape(*lead, u, ih // u, v, iw // v, c)
+        order = (0, 2, 1, 3, 4)
+    return _permute(x, tuple(range(n)) + tuple(n + k for k in order))
 
 
 def from_mosaic(img: ArrayT, views: int | tuple[int, int]) -> ArrayT:
@@ -322,17 +335,7 @@ def from_mosaic(img: ArrayT, views: int | tuple[int, int]) -> ArrayT:
         - img: ``(*, U*H, V*W, C)``
         - output: ``(*, U, V, H, W, C)``
     """
-    u, v = (views, views) if isinstance(views, (int, np.integer)) else views
-    if img.ndim < 3:
-        raise LFShapeError(f"mosaic: expected (..., H, W, C), got shape {tuple(img.shape)}")
-    mh, mw, c = (int(s) for s in img.shape[-3:])
-    if u < 1 or v < 1 or mh % u or mw % v:
-        raise LFShapeError(f"mosaic: size {mh}x{mw} is not a multiple of the view grid {u}x{v}")
-    lead = tuple(img.shape[:-3])
-    n = len(lead)
-    x = img.reshape(*lead, u, mh // u, v, mw // v, c)
-    axes = tuple(range(n)) + (n + 0, n + 2, n + 1, n + 3, n + 4)
-    return _permute(x, axes)
+    return _untile(img, views, lenslet=False)
 
 
 def aperture_weights(

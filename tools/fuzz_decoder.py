@@ -99,7 +99,7 @@ def _run_input(data: bytes) -> None:
             out = decode_hint(body[2:], (h, w))
             assert out.shape == (h, w) and np.isfinite(out).all()
         elif target == "gains":
-            from lfstream.codec.shading import decode_gains
+            from lfstream.codec.gains import decode_gains
 
             u, v = 1 + (body[:1] or b"\0")[0] % 9, 1 + (body[1:2] or b"\0")[0] % 9
             out = decode_gains(body[2:], (u, v))
@@ -171,9 +171,9 @@ def main(argv: list[str] | None = None) -> int:
         import lfstream  # noqa: F401 - instrumented for coverage
         import lfstream.codec.bitstream  # noqa: F401
         import lfstream.codec.decoder  # noqa: F401
+        import lfstream.codec.gains  # noqa: F401
         import lfstream.codec.hint  # noqa: F401
         import lfstream.codec.residual  # noqa: F401
-        import lfstream.codec.shading  # noqa: F401
     atheris.Setup(argv, one_input)
     atheris.Fuzz()
     return 0

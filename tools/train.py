@@ -263,7 +263,7 @@ def depth_sample(name: str, lf: np.ndarray, present: np.ndarray, quality: int, h
     """One LF (``(U, V, H, W, 3)`` uint8, the views ``present`` marks real) through the
     default encode at ``quality`` with the hint at ``1 / hint_scale``, decoded
     (:func:`decoded_parts`), with the per-view maps and full-resolution gains the warp uses."""
-    from lfstream.codec.shading import upsample_gain
+    from lfstream.codec.gains import upsample_gain
     from lfstream.codec.warp import view_disparities
     from lfstream.lightfield import view_offsets
 

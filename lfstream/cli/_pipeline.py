@@ -66,12 +66,10 @@ def single_threaded_opencv() -> Iterator[None]:
     setting: the command decides it, not the library."""
     import cv2
 
-    before = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
+    from lfstream.codec.workers import single_thread
+
+    with single_thread(cv2.getNumThreads, cv2.setNumThreads):
         yield
-    finally:
-        cv2.setNumThreads(before)
 
 
 def check_output_folder(out: Path | None) -> None:

@@ -5,7 +5,7 @@ Data flow, one module per step:
 - :mod:`~lfstream.codec.encoder`: the frame -> a :class:`~lfstream.codec.bitstream.Packet`
   (the centre view by :mod:`~lfstream.codec.jpeg` or, in the ``balanced``/``best`` presets,
   as an AV1 key frame by :mod:`~lfstream.codec.intra`; the depth hint by
-  :mod:`~lfstream.codec.hint`, per-view gains by :mod:`~lfstream.codec.shading`; on request
+  :mod:`~lfstream.codec.hint`, per-view gains by :mod:`~lfstream.codec.gains`; on request
   the JPEG-Hance strength map by :mod:`~lfstream.codec.hance`).
 - :mod:`~lfstream.codec.bitstream`: the ``.lfs`` container (header, packets, limits, CRCs).
 - :mod:`~lfstream.codec.decoder`: packet -> light field (JPEG-Hance where it helps,

@@ -25,7 +25,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from lfstream.codec.watchdog import call_with_deadline, encoder_deadline
+from lfstream.codec.deadline import call_with_deadline, encoder_deadline
 from lfstream.errors import LFValueError
 from lfstream.io.video import rgb_to_video_i420
 from lfstream.lightfield import check_lf, to_uint8
@@ -128,7 +128,7 @@ def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order
 
         quiet_svt_log()
 
-    def run() -> bytes:  # self-contained, so the watchdog can retry it on a fresh encoder
+    def run() -> bytes:  # self-contained, so the deadline guard can retry it on a fresh encoder
         buf = io.BytesIO()
         with av.open(buf, mode="w", format=spec.container) as container:
             stream = container.add_stream(spec.encoder, rate=Fraction(25, 1),

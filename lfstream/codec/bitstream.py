@@ -34,7 +34,7 @@ Packet (the unit every transport carries)::
     residual_len u32      version 3 only: length of the residual layer (0: none)
     image        bytes
     hint         bytes    zstd-compressed quantised disparity (see :mod:`lfstream.codec.hint`)
-    gain         bytes    per-view brightness gains (see :mod:`lfstream.codec.shading`)
+    gain         bytes    per-view brightness gains (see :mod:`lfstream.codec.gains`)
     meta         bytes    zstd-compressed JSON
     residual     bytes    version 3 only: the residual views (see :mod:`lfstream.codec.residual`)
     crc          u32      CRC32 of the packet from ``sync`` to the end of the last payload

@@ -32,12 +32,12 @@ from lfstream.codec.bitstream import (
     iter_packets,
     read_header,
 )
+from lfstream.codec.gains import GainDecoder, GainReferenceError
 from lfstream.codec.hance import HANCE_MAP_PRESET
 from lfstream.codec.hint import HintDecoder, HintReferenceError
 from lfstream.codec.intra import decode_centre
 from lfstream.codec.jpeg import blend_restored, hance_map, hance_strength, post_filter_jpeg
 from lfstream.codec.residual import VIEW_MODES, apply_residual, decode_residual, residual_mode
-from lfstream.codec.shading import GainDecoder, GainReferenceError
 from lfstream.codec.warp import warp_views, warp_views_per_view
 from lfstream.errors import BitstreamError, LFFileError, LFValueError
 from lfstream.lightfield import check_first_frame, frames_in_range
@@ -313,7 +313,7 @@ class Decoder:
         """Each packet's residual layer decoding (dav1d) on a worker thread, started before the
         centre view, the hint and the warp, which it does not depend on (``None`` where none
         is applied)."""
-        from lfstream.codec.watchdog import in_background, on_worker_thread
+        from lfstream.codec.workers import in_background, on_worker_thread
 
         if on_worker_thread():  # decoded inline there: a worker must not wait on the pool
             return [None] * len(packets)

@@ -1,7 +1,7 @@
 """The encoder (seed chapter 3): per frame, the centre view as a JPEG (or, in the
 ``balanced`` and ``best`` presets, an AV1 key frame: :mod:`lfstream.codec.intra`); with the
 depth hint also the centre view's disparity (:mod:`lfstream.codec.hint`); per-view shading
-gains where the views differ in brightness (:mod:`lfstream.codec.shading`); optionally the
+gains where the views differ in brightness (:mod:`lfstream.codec.gains`); optionally the
 residual layer, what the decoder's prediction misses in every other view
 (:mod:`lfstream.codec.residual`).
 
@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_version, with_present
+from lfstream.codec.gains import GainTracker, measure_gains, shading_present
 from lfstream.codec.hint import HintOptions, HintTracker
 from lfstream.codec.intra import AV1_MIN_VIEW, CentreCoding, av1_fits, encode_centre
 from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
-from lfstream.codec.shading import GainTracker, measure_gains, shading_present
-from lfstream.codec.watchdog import beside, completed
+from lfstream.codec.workers import beside, completed
 from lfstream.errors import LFValueError
 from lfstream.io._fs import atomic_open
 from lfstream.lightfield import centre_view, check_finite, check_lf, check_unit_range, to_uint8
@@ -323,7 +323,7 @@ class Encoder:
         """Frame 0's ``packet`` with its key hint sent at twice the scale, from the same sweep,
         and its shading gains, where it has any, measured again against that hint (a frame
         without shading against the finer hint keeps none; ``gains``: that measurement where the
-        caller made it, :func:`lfstream.codec.shading.measure_gains` against
+        caller made it, :func:`lfstream.codec.gains.measure_gains` against
         :meth:`coarser_first_hint`; ``payload``: :func:`lfstream.codec.hint.key_payload` of that
         hint, likewise);
         the frames after it follow at that scale (:attr:`hint_options`, which the header

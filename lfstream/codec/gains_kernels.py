@@ -1,5 +1,5 @@
 """The shading gains' kernels, compiled by numba: the samples the encoder fits the gains to
-and the gains applied to views (:mod:`lfstream.codec.shading` calls them)."""
+and the gains applied to views (:mod:`lfstream.codec.gains` calls them)."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ def _gain_apply_row(src_row, top, bottom, b0, b1, dst_row):  # pragma: no cover 
 def apply_view_gains(views, which, gains, active, rows, row_w, cols, col_w, out):  # pragma: no cover - compiled
     """Each view times its gain map bilinearly up-sampled, rounded to uint8, with OpenCV's
     arithmetic for ``cv2.multiply(view, cv2.resize(gain, (W, H), INTER_LINEAR), dtype=CV_8U)``
-    view by view (:func:`lfstream.codec.shading.apply_gains`), in one parallel pass that
+    view by view (:func:`lfstream.codec.gains.apply_gains`), in one parallel pass that
     writes each output byte once.
 
     Args:
@@ -49,7 +49,7 @@ def apply_view_gains(views, which, gains, active, rows, row_w, cols, col_w, out)
         gains: (U, V, gh, gw, Cg) float32, Cg = 1 or C.
         active: (U * V,) bool, False where a view's map is 1 everywhere: it is copied.
         rows, row_w: (H, 2) int64 grid rows per image row and (H, 2) float32 their weights
-            (OpenCV's, :func:`lfstream.codec.shading.resize_taps`); cols, col_w: the same per column.
+            (OpenCV's, :func:`lfstream.codec.gains.resize_taps`); cols, col_w: the same per column.
         out: (U, V, H, W * C) uint8, overwritten.
     """
     n_u, n_v = gains.shape[0], gains.shape[1]
@@ -110,7 +110,7 @@ def _gain_sample_at(ys, xs, d_samples, i, j, oy, ox, h, w, c):  # pragma: no cov
 # ``rint(y - d * off)`` does (no fused multiply-add), so the gains are the same to the bit.
 @numba.njit(parallel=True, cache=True, nogil=True)
 def gain_samples(lf, ys, xs, d_samples, offsets, scale, out):  # pragma: no cover - compiled
-    """The shading gains' samples (:func:`lfstream.codec.shading.measure_gains`): view (a, b)
+    """The shading gains' samples (:func:`lfstream.codec.gains.measure_gains`): view (a, b)
     read at ``(ys[i], xs[j]) - d_samples[i, j] * offsets[a, b]`` (rounded half to even,
     clamped to the view), times ``scale``; the views' sample grids stacked along the rows.
 

@@ -24,8 +24,8 @@ import cv2
 import numpy as np
 
 from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, CODEC_NAMES
+from lfstream.codec.deadline import call_with_deadline, encoder_deadline
 from lfstream.codec.jpeg import QUALITY_RANGE, decode_jpeg, encode_jpeg
-from lfstream.codec.watchdog import call_with_deadline, encoder_deadline
 from lfstream.errors import BitstreamError, LFValueError
 
 CODEC_IDS = {name: cid for cid, name in CODEC_NAMES.items()}

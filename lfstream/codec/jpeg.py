@@ -350,7 +350,7 @@ def hance_strength(levels: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     Shape:
         - levels: ``(rows, cols)``; output: ``(H, W)`` float32
     """
-    from lfstream.codec.shading import resize_taps
+    from lfstream.codec.gains import resize_taps
 
     h, w = size
     tiles = np.asarray(levels, np.float32) / np.float32(HANCE_LEVELS)

@@ -52,9 +52,9 @@ import numpy as np
 
 from lfstream.codec.baseline import view_order
 from lfstream.codec.bitstream import CODEC_AV1
+from lfstream.codec.deadline import call_with_deadline, encoder_deadline
 from lfstream.codec.intra import CentreCoding, i420_to_rgb, pad_to_even, rgb_to_i420, svtav1_encoder
 from lfstream.codec.jpeg import QUALITY_RANGE
-from lfstream.codec.watchdog import call_with_deadline, encoder_deadline
 from lfstream.errors import BitstreamError, LFValueError
 
 RESIDUAL_FORMAT = 1  # view - prediction
@@ -182,7 +182,7 @@ def _encode_sequence(frame_at, count: int, size: tuple[int, int], quality: int, 
     h, w = size
 
     def run() -> list[bytes]:
-        # self-contained (its own encoder, frames made on the way) so the watchdog can retry it
+        # self-contained (its own encoder, frames made on the way) so the deadline guard can retry it
         ctx = svtav1_encoder((h + h % 2, w + w % 2), quality, speed, gop=count)
         packets: list[bytes] = []
         for k in range(count):

@@ -180,7 +180,7 @@ def _linear_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray]:
     """OpenCV's INTER_LINEAR resize taps from ``n_in`` to ``n_out`` samples (half-pixel
     centres, clamped at the ends): per output sample the two input indices and the weight
     of the first, computed in float64 (OpenCV's own float32 weights are
-    :func:`lfstream.codec.shading.resize_taps`, the flat decode's; these stay because the
+    :func:`lfstream.codec.gains.resize_taps`, the flat decode's; these stay because the
     warp's bytes, on the CPU and the GPU, follow them)."""
     f = (np.arange(n_out, dtype=np.float64) + 0.5) * (n_in / n_out) - 0.5
     i0 = np.floor(f)
@@ -214,7 +214,7 @@ def warp_views(
         views: ``(U, V)`` of the output.
         occlusion: per-view disparity by z-tested forward splatting where it can matter
             (:func:`splat_rows`; see the module docstring).
-        gains: ``(U, V, gh, gw, 1 or C)`` per-view gain maps (:mod:`lfstream.codec.shading`),
+        gains: ``(U, V, gh, gw, 1 or C)`` per-view gain maps (:mod:`lfstream.codec.gains`),
             bilinearly up-sampled and multiplied in; ``None``: none.
         axes: ``(2, 2)`` view axes of the capture (:func:`lfstream.lightfield.view_offsets`);
             ``None``: the convention.
@@ -242,7 +242,7 @@ def warp_views(
         if gains is None:
             result[...] = src
             return result
-        from lfstream.codec.shading import apply_gains
+        from lfstream.codec.gains import apply_gains
 
         return apply_gains(np.broadcast_to(src, (u, v, h, w, c)), gains, out=result)
     d = np.ascontiguousarray(d)
@@ -300,7 +300,7 @@ def _check_views(views: tuple[int, int], name: str = "views") -> tuple[int, int]
 
 def _check_gains(gains: np.ndarray | None, views: tuple[int, int], c: int) -> np.ndarray | None:
     """The gain maps as float32, or ``None`` where there are none or all are 1."""
-    from lfstream.codec.shading import check_gain_maps
+    from lfstream.codec.gains import check_gain_maps
 
     if gains is None:
         return None
@@ -431,7 +431,7 @@ def _warp_beside(beside: Future, ranked: np.ndarray, warp) -> int:
     """Warps views of ``ranked`` in order, :data:`BESIDE_CHUNK_VIEWS` a call, on the
     calling thread alone (numba's thread count is per thread; restored) until ``beside``
     is done; returns how many it warped."""
-    from lfstream.codec.watchdog import single_numba_thread
+    from lfstream.codec.workers import single_numba_thread
 
     done = 0
     with single_numba_thread():

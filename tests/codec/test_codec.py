@@ -164,8 +164,8 @@ def test_cli_encode_decode_and_damaged_stream(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["frames"] == 3
 
 
-def test_shading_gains_fix_vignetted_views():
-    from lfstream.codec.shading import decode_gains, encode_gains, measure_gains, shading_present
+def test_gains_gains_fix_vignetted_views():
+    from lfstream.codec.gains import decode_gains, encode_gains, measure_gains, shading_present
 
     vig = synth_clip(1, 5, (64, 96), seed=8, vignetting=0.6, motion=0, camera_pan=0).lf[0]
     clean = synth_clip(1, 5, (64, 96), seed=8, motion=0, camera_pan=0).lf[0]

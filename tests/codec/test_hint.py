@@ -292,7 +292,7 @@ def test_start_encode_sets_the_hint_at_once_and_codes_the_same_payloads():
     """start_encode's future holds encode's bytes, key hints and deltas alike, and the hint
     it sends (``last``) is known before the payload is asked for; on a worker thread (the
     lane, say) the payload is coded before it returns."""
-    from lfstream.codec.watchdog import beside
+    from lfstream.codec.workers import beside
 
     clip = synth_clip(3, 5, (64, 96), seed=5, motion=0.5, camera_pan=0.0).lf
     one, other = H.HintTracker(H.HintOptions(key_interval=2)), H.HintTracker(H.HintOptions(key_interval=2))

@@ -164,8 +164,8 @@ def test_the_coarser_hints_gains_measured_beside_the_check_are_the_ones_it_sends
     finer one; passed to coarsen_first_hint they give the packet it makes measuring them
     itself, byte for byte, and the default stream is the one that sends them."""
     from lfstream.codec.encoder import Encoder
+    from lfstream.codec.gains import measure_gains
     from lfstream.codec.rate import choose_default
-    from lfstream.codec.shading import measure_gains
 
     lf = synth_clip(1, 7, (192, 256), seed=3, noise=1.0, vignetting=0.3, motion=0, camera_pan=0).lf[0]
     packets = []

@@ -379,7 +379,7 @@ def test_residual_streams_decode_the_same_from_the_worker_threads(coded):
     """The decoder decodes a packet's residual on a worker thread beside the warp; called
     from those workers themselves (both busy at once) it decodes inline instead of waiting
     on their queue, and every result is the same."""
-    from lfstream.codec.watchdog import in_background, on_worker_thread
+    from lfstream.codec.workers import in_background, on_worker_thread
 
     expected = decode(coded)
     jobs = [in_background(lambda: (on_worker_thread(), decode(coded))) for _ in range(4)]

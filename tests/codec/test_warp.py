@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lfstream.codec import warp as warp_module
-from lfstream.codec.shading import apply_gains
+from lfstream.codec.gains import apply_gains
 from lfstream.codec.warp import (
     SPLAT_TOLERANCE_PX,
     VIEW_COST_SPLAT,

@@ -109,7 +109,7 @@ def estimate_hint_map(lf: np.ndarray, options: HintOptions = HintOptions(), pres
         # convention meanwhile: it is what almost every capture turns out to follow, and
         # where the detection finds other axes the sweeps run again with them (same result
         # as detecting first, either way)
-        from lfstream.codec.watchdog import beside
+        from lfstream.codec.workers import beside
 
         use = _axes_views(keys, u, v, present)
         detection = beside(lambda: _detect_axes(grids, steps, use, work))

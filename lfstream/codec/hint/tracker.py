@@ -51,7 +51,7 @@ class HintTracker:
         """:meth:`encode`, returning as soon as the hint is known (:attr:`last` is set): the
         future of its payload, whose entropy coding runs on a worker thread meanwhile, so the caller can measure what depends on
         the hint (the shading gains) beside it. On a worker thread, coded before returning."""
-        from lfstream.codec.watchdog import completed, in_background, on_worker_thread
+        from lfstream.codec.workers import completed, in_background, on_worker_thread
 
         opts = self.options
         prev = self._prev

@@ -18,9 +18,9 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet
 from lfstream.codec.encoder import Encoder
+from lfstream.codec.gains import measure_gains
 from lfstream.codec.hint import HintOptions, key_payload
 from lfstream.codec.intra import av1_fits
-from lfstream.codec.shading import measure_gains
 from lfstream.errors import LFValueError
 from lfstream.lightfield import to_uint8
 

@@ -1,4 +1,4 @@
-"""Gain maps in a video (lfstream.codec.shading): key maps, deltas with a dead band, lost
+"""Gain maps in a video (lfstream.codec.gains): key maps, deltas with a dead band, lost
 references."""
 
 import numpy as np
@@ -8,7 +8,7 @@ import lfstream
 from lfstream.codec.bitstream import split_stream
 from lfstream.codec.decoder import Decoder
 from lfstream.codec.encoder import Encoder
-from lfstream.codec.shading import (
+from lfstream.codec.gains import (
     VERSION,
     VERSION_CODED,
     VERSION_DELTA,
@@ -213,7 +213,7 @@ def test_coded_key_maps_are_exact_smaller_than_zstd_and_version_1_still_decodes(
     zstd payload it replaced (version 1) is larger and still decodes to the same."""
     import zstandard
 
-    from lfstream.codec.shading import _HEADER, dequantise_gains, quantise_gains
+    from lfstream.codec.gains import _HEADER, dequantise_gains, quantise_gains
 
     for g in shaded_gains[:3]:
         q = quantise_gains(g)
@@ -246,7 +246,7 @@ def reference_apply_gains(lf: np.ndarray, gains: np.ndarray) -> np.ndarray:
     """apply_gains's definition, view by view in numpy: OpenCV's INTER_LINEAR taps
     (``resize_taps``), its horizontal then vertical float32 passes, and ``cv2.multiply``'s
     float32 product rounded half to even and saturated."""
-    from lfstream.codec.shading import resize_taps
+    from lfstream.codec.gains import resize_taps
 
     u, v, h, w, c = lf.shape
     rows, row_w = resize_taps(h, gains.shape[2])
@@ -275,7 +275,7 @@ def test_apply_gains_equals_its_reference_and_opencv_within_a_level(views, size,
     (which may use IPP's CPU-specific code for the resize) agree within one level."""
     import cv2
 
-    from lfstream.codec.shading import apply_gains, upsample_gain
+    from lfstream.codec.gains import apply_gains, upsample_gain
 
     rng = np.random.default_rng(sum(size) + channels)
     (u, v), (h, w) = views, size
@@ -301,7 +301,7 @@ def test_apply_gains_equals_its_reference_and_opencv_within_a_level(views, size,
 
 @pytest.mark.parametrize("shape", [(3, 3, 2, 2), (3, 2, 2, 2, 3), (3, 3, 2, 2, 2), (3, 3, 0, 2, 3)])
 def test_apply_gains_refuses_maps_that_do_not_match_the_views(shape):
-    from lfstream.codec.shading import apply_gains
+    from lfstream.codec.gains import apply_gains
     from lfstream.codec.warp import warp_views
     from lfstream.errors import LFShapeError
 
