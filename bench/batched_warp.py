@@ -4,8 +4,8 @@ per second: the seed's GPU measurement (30 light fields of 7x7x375x540 in under 
 
 Decoded centre views, disparities (the hint, edge-aware up-sampled) and gain maps of the
 default encode of distinct frames of the built-in synthetic clip are warped into every view
-(:func:`lfstream.codec.warp_batched.warp_views_batched`), ``--batch`` frames per call, on
-``--device``; in the same run the CPU kernel (:func:`lfstream.codec.warp.warp_views`, all
+(:func:`lfstream.codec.warp.batched.warp_views_batched`), ``--batch`` frames per call, on
+``--device``; in the same run the CPU kernel (:func:`lfstream.codec.warp.cpu.warp_views`, all
 cores) warps the same frames one by one. Rows: LF/s of each, the device's both with the
 frames already on it and with the host-to-device copy of the inputs and the copy of the light
 fields back, and the largest difference from the kernel's bytes (the tests bound it to one
@@ -25,11 +25,12 @@ import torch
 from _harness import emit, parser, timeit
 
 import lfstream
+from lfstream.codec.api import iter_decode
 from lfstream.codec.bitstream import iter_packets, read_header
-from lfstream.codec.decoder import Decoder, iter_decode
+from lfstream.codec.decoder import Decoder
 from lfstream.codec.hint import HintDecoder
-from lfstream.codec.warp import warp_views
-from lfstream.codec.warp_batched import warp_views_batched
+from lfstream.codec.warp.batched import warp_views_batched
+from lfstream.codec.warp.cpu import warp_views
 from lfstream.synth import synth_clip
 
 

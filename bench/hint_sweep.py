@@ -4,7 +4,7 @@ a GPU).
 For the synthetic clip's first frame and every 7x7-or-larger shared sample, the key hint's
 map (:func:`lfstream.codec.hint.estimate_hint_map`: luma block means, axes, range pass,
 sweep) on the CPU kernels and with its two sweeps on ``--device``
-(:mod:`lfstream.codec.sweep_batched`), and the main sweep alone both ways (the luma and
+(:mod:`lfstream.codec.hint.sweep_batched`), and the main sweep alone both ways (the luma and
 axes before it stay on the CPU either way). Rows: ms per frame (median of ``--runs``), and
 how far the device's map is from the kernels' (share of cells within 0.001 px, largest
 difference; the tests bound both). On the CPU the tensor path is a reference, not a path:

@@ -36,8 +36,8 @@ def main(argv=None) -> dict:
         for _ in range(args.frames):
             yield frame
 
-    pipe = Pipeline(source(), StreamConfig(refocus="sas", sink_delay_s=args.sink_delay, metrics=False, save=(),
-                                           depth_hint=False), None)
+    pipe = Pipeline(source(), StreamConfig(refocus="sas", metrics=False, save=(), depth_hint=False), None,
+                    sink_delay_s=args.sink_delay)
     samples = []
 
     def watch():

@@ -2,7 +2,7 @@
 non-learned alternatives, with CPU time (and GPU time with --device cuda).
 
 - JPEG-Hance: PSNR/SSIM gain over plain JPEG and over the decoder's classical post-filter
-  (:func:`lfstream.codec.jpeg.deblock_jpeg`) on held-out synthetic centre views and the
+  (:func:`lfstream.codec.centre.jpeg.deblock_jpeg`) on held-out synthetic centre views and the
   real samples' centre views, per preset, and the gain against JPEG quality (the threshold
   the decoder's ``hance="auto"`` uses); on the decoded LF of each real sample, ``hance="on"``
   against ``"off"``, and with the encoder's strength map (``hance_map=True``).
@@ -25,8 +25,8 @@ from _harness import SHARED, SHARED_SCENES, emit, parser, timeit
 
 import lfstream
 from lfstream.codec import decode
+from lfstream.codec.centre.jpeg import deblock_jpeg, decode_jpeg, encode_jpeg, jpeg_quality_scale
 from lfstream.codec.hint import HintOptions
-from lfstream.codec.jpeg import deblock_jpeg, decode_jpeg, encode_jpeg, jpeg_quality_scale
 from lfstream.lightfield import to_network_input
 from lfstream.metrics import capped, mpsnr, mssim, psnr, ssim
 from lfstream.models.depth_net import predict_view_disparities
@@ -123,7 +123,7 @@ def hance_lf_rows(device: str, quick: bool) -> list[dict]:
     with JPEG-Hance of each shipped preset (``hance="on"``) against without it (``"off"``:
     the post-filter), MPSNR and MSSIM over the views present, scenes the network trained on
     marked; for the fast preset also with the encoder's strength map."""
-    from lfstream.codec.hance import HANCE_MAP_PRESET
+    from lfstream.codec.centre.hance import HANCE_MAP_PRESET
 
     rows = []
     lfs = real_lfs(tuple(SHARED_SCENES)[:1] if quick else tuple(SHARED_SCENES))
@@ -146,7 +146,7 @@ def hance_lf_rows(device: str, quick: bool) -> list[dict]:
                     f"({row['on_mpsnr'] - row['off_mpsnr']:+.3f}), MSSIM {row['off_mssim']:.4f} -> "
                     f"{row['on_mssim']:.4f}")
             if preset == HANCE_MAP_PRESET:
-                # the same encode with the encoder's strength map (lfstream.codec.hance), decoded with the network
+                # the same encode with the encoder's strength map (lfstream.codec.centre.hance), decoded with the network
                 mapped = lfstream.encode(lf, present=mask, preset="fast", hance_map=True)
                 row["map_bytes"] = len(mapped) - len(data)
                 row["map_mpsnr"], row["map_mssim"] = decoded_quality(mapped, ref, mask, preset, hance="on",

@@ -1,4 +1,4 @@
-"""Launch settings of the decoder's Triton warp kernels (:mod:`lfstream.codec.warp_triton`:
+"""Launch settings of the decoder's Triton warp kernels (:mod:`lfstream.codec.warp.triton`:
 pixels and warps a program of the per-pixel warp and the splat, warps of the row kernels),
 each alternated with the others in one process on the same decoded frames: the time a call
 per setting, its ratio to the module's settings, the bytes checked equal to theirs, and the
@@ -18,7 +18,7 @@ import torch
 from _harness import emit, parser, timeit
 from batched_warp import decoded_frames
 
-from lfstream.codec.warp_batched import warp_views_batched
+from lfstream.codec.warp.batched import warp_views_batched
 
 #: the module constants a setting may change, and the values tried besides the module's
 CHOICES = {"_BLOCK": (256, 512, 1024), "_WARP_WARPS": (2, 4, 8), "_SPLAT_BLOCK": (256, 512, 1024),
@@ -48,7 +48,7 @@ def main(argv=None) -> dict:
         print("warp_launch: needs a CUDA device")
         return {}
     try:
-        from lfstream.codec import warp_triton
+        from lfstream.codec.warp import triton as warp_triton
     except ImportError:
         print("warp_launch: needs Triton (CUDA builds of torch bring it)")
         return {}

@@ -13,7 +13,7 @@ from hypothesis import settings
 
 # CI draws the property tests' examples from a fixed seed, so a landing does not hinge on
 # which random examples a run drew (one run found a real bug that way: the fix and its
-# regression test are in tests/codec/test_hint.py); a local run keeps drawing new ones, and
+# regression test are in tests/codec/hint/test_hint.py); a local run keeps drawing new ones, and
 # tools/fuzz_codec.py is the long random run
 settings.register_profile("ci", derandomize=True)
 if os.environ.get("CI"):

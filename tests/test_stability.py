@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import lfstream
-from lfstream.codec.warp import warp_views
+from lfstream.codec.warp.cpu import warp_views
 from lfstream.errors import LFStreamError
 from lfstream.lightfield import view_offsets
 from lfstream.metrics import mpsnr, mssim, psnr, ssim

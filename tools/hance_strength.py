@@ -41,7 +41,7 @@ def strength_on(name: str, model, quality: int) -> dict:
     import lfstream
     from lfstream.codec.bitstream import iter_packets, read_header
     from lfstream.codec.decoder import Decoder
-    from lfstream.codec.warp import warp_views
+    from lfstream.codec.warp.cpu import warp_views
     from lfstream.metrics import mpsnr, mssim
     from lfstream.models.jpeg_hance import restore_images
 

@@ -181,7 +181,7 @@ def real_hance_batch(views: list[np.ndarray], recipe: Recipe, rng: np.random.Gen
     Augmented for what the training scenes lack: 30 % darkened (scale 0..0.5, minus up to 20
     levels: black backgrounds such as the rendered seahorse's), 9 % flat colour with 0..2
     levels of noise, half mirrored; then JPEG at a random recipe quality and the post-filter
-    the encoder chooses for the crop (:func:`lfstream.codec.jpeg.jpeg_roundtrip`), as the
+    the encoder chooses for the crop (:func:`lfstream.codec.centre.jpeg.jpeg_roundtrip`), as the
     decoder would apply it.
     """
     c = recipe.crop
@@ -250,7 +250,7 @@ def decoded_parts(lf: np.ndarray, present: np.ndarray | None, quality: int, hint
     import io
 
     import lfstream
-    from lfstream.codec.decoder import iter_decode
+    from lfstream.codec.api import iter_decode
     from lfstream.codec.hint import HintOptions
 
     # the JPEG centre the networks restore (the default codes grids under 7x7 with AV1)
@@ -264,7 +264,7 @@ def depth_sample(name: str, lf: np.ndarray, present: np.ndarray, quality: int, h
     default encode at ``quality`` with the hint at ``1 / hint_scale``, decoded
     (:func:`decoded_parts`), with the per-view maps and full-resolution gains the warp uses."""
     from lfstream.codec.gains import upsample_gain
-    from lfstream.codec.warp import view_disparities
+    from lfstream.codec.warp.cpu import view_disparities
     from lfstream.lightfield import view_offsets
 
     u, v, h, w, _ = lf.shape

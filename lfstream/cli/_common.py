@@ -100,6 +100,37 @@ def float_in(lo: float, hi: float) -> Callable[[str], float]:
     return parse
 
 
+def add_coding_options(p: argparse.ArgumentParser) -> None:
+    """How ``encode`` and ``stream`` code a light field: ``--quality`` or ``--bpp``,
+    ``--preset``, ``--residual``, ``--residual-mode``, ``--hance-map`` (one wording for both)."""
+    from lfstream.codec.centre.jpeg import QUALITY_RANGE
+    from lfstream.codec.encoder import PRESETS
+    from lfstream.codec.residual import RESIDUAL_MODES
+
+    rate = p.add_mutually_exclusive_group()
+    rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="quality of the centre view (default 50)")
+    rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target size in bits per pixel: rate control on the first "
+                      "frame picks the preset (unless --preset), quality, hint and residual from a model of bits "
+                      "against quality, then follows the running budget")
+    p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG), balanced "
+                   "(AV1, SVT preset 12), best (AV1, SVT preset 8). Default: fast from 7x7 views up, balanced "
+                   "below, best up to 3x3, and the views as one AV1 sequence where the first frame shows that "
+                   "warping cannot predict them; --bpp with fast searches only the quality: tens of ms")
+    p.add_argument("--residual", type=int_in(QUALITY_RANGE), metavar="Q",
+                   help="quality 1..100 of the residual layer: every view's prediction error coded as one AV1 "
+                   "sequence (more bits, quality that keeps rising with rate; default: none, --bpp decides itself)")
+    p.add_argument("--residual-mode", choices=RESIDUAL_MODES, default="prediction",
+                   help="what the residual layer codes: prediction (the prediction's error, the default), views "
+                   "(the views themselves: for scenes warping cannot predict; no warp at decode; with "
+                   "--preset balanced|best and --residual equal to --quality the centre view is the views "
+                   "sequence's key frame) or half-views (the same at half size, for the lowest rates)")
+    p.add_argument("--hance-map", action="store_true",
+                   help="send a JPEG-Hance strength map with each JPEG centre view, measured by the encoder on "
+                   "the decoded light field (on key frames a decode, the network and a warp per strength; a few "
+                   "ms the frames between); decoding with --hance auto (the default) or on then blends the "
+                   "network's correction by it")
+
+
 def add_read_options(p: argparse.ArgumentParser) -> None:
     """Options every command that reads a light field shares (:class:`ReadOptions`)."""
     from lfstream.lightfield import MAX_VIEWS_PER_AXIS

@@ -9,8 +9,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from lfstream.cli._common import coding_layers, emit, float_in, int_in, parse_float_list, path_arg
-from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
-from lfstream.stream.config import BATCH_RANGE, FOCUS_MODES, QUEUE_RANGE, REFOCUS_MODES, SAVE_KINDS, StreamConfig
+from lfstream.codec.decoder import BATCH_RANGE, DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
+from lfstream.stream.config import FOCUS_MODES, QUEUE_RANGE, REFOCUS_MODES, SAVE_KINDS, StreamConfig
 
 
 def parse_focus(text: str) -> str | tuple[float, ...]:
@@ -43,8 +43,6 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--save", default="mp4", help=f"comma list of {', '.join(SAVE_KINDS)} "
                    "(mp4: one per focal plane)")
     p.add_argument("--no-skip-static", action="store_true", help="always recompute the disparity")
-    p.add_argument("--skip-planes", action="store_true",
-                   help="render focal planes outside the scene's disparity range by a cheap path")
     p.add_argument("--mssim-every", type=int_in((0, 1 << 30)), default=StreamConfig.mssim_every,
                    help="MSSIM on every N-th frame, from frame 0 (default: once a second of 30 fps video; 0: "
                         "never; MPSNR on all); the summary lists the frames in mssim_frames")
@@ -104,7 +102,7 @@ def pipeline_config(args: argparse.Namespace, **extra) -> StreamConfig:
                        batch=args.batch, depth=args.depth,
                        hance=args.hance, networks=args.networks,
                        save=tuple(s for s in args.save.split(",") if s), skip_static=not args.no_skip_static,
-                       skip_planes=args.skip_planes, mssim_every=args.mssim_every, queue_size=args.queue_size, **extra)
+                       mssim_every=args.mssim_every, queue_size=args.queue_size, **extra)
     cfg.validate()
     return cfg
 

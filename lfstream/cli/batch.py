@@ -6,9 +6,9 @@ import argparse
 import sys
 
 from lfstream.cli._common import add_read_options, emit, int_in, path_arg, read_options
+from lfstream.codec.centre.jpeg import QUALITY_RANGE
 from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
 from lfstream.codec.encoder import PRESETS
-from lfstream.codec.jpeg import QUALITY_RANGE
 
 HELP = "encode or decode a collection of LF videos, in this process or on a Ray cluster"
 #: Engines and modes of lfstream.cluster.run (kept here so --help imports nothing heavy).

@@ -52,8 +52,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from lfstream.codec.api import iter_decode
     from lfstream.codec.bitstream import count_packets, header_present, read_header
-    from lfstream.codec.decoder import iter_decode
     from lfstream.errors import BitstreamError, LFFileError
     from lfstream.io import FrameWriter, write_lf, write_pfm
     from lfstream.io._fs import prepare_output_dir

@@ -9,17 +9,15 @@ import time
 from lfstream.cli._common import (
     EXIT_INTERRUPTED,
     FrameBoundaryStop,
+    add_coding_options,
     add_read_options,
     emit,
     float_in,
-    int_in,
     path_arg,
     read_input,
 )
-from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS
+from lfstream.codec.encoder import DEFAULT_PRESET
 from lfstream.codec.hint import HintOptions
-from lfstream.codec.jpeg import QUALITY_RANGE
-from lfstream.codec.residual import RESIDUAL_MODES
 
 HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre view + depth hint)"
 
@@ -27,34 +25,12 @@ HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre v
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=path_arg, help="light field or LF video to encode (any format lfstream reads)")
     p.add_argument("-o", "--output", type=path_arg, required=True, help="the .lfs file (never overwritten without --overwrite)")
-    rate = p.add_mutually_exclusive_group()
-    rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="quality of the centre view (default 50)")
-    rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target size in bits per pixel: rate control picks the "
-                      "preset (unless --preset), quality, hint and hint precision (best first-frame MPSNR within 15 %%)")
-    p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG), balanced "
-                   "(AV1, SVT preset 12), best (AV1, SVT preset 8). Default: fast from 7x7 views up, balanced "
-                   "below, best up to 3x3, and the views as one AV1 sequence where the first frame shows that "
-                   "warping cannot predict them; with --bpp, the default is to try all three (a search of seconds); "
-                   "--bpp with fast searches only the quality (and the residual at high rates): tens of ms")
-    p.add_argument("--residual", type=int_in(QUALITY_RANGE), metavar="Q",
-                   help="quality 1..100 of the residual layer: every view's prediction "
-                   "error coded as one AV1 sequence "
-                   "(more bits, quality that keeps rising with rate; default: none, --bpp decides itself)")
-    p.add_argument("--residual-mode", choices=RESIDUAL_MODES, default="prediction",
-                   help="what the residual layer codes: prediction (the prediction's error, the default), views "
-                   "(the views themselves: for scenes warping cannot predict; no warp at decode; with "
-                   "--preset balanced|best and --residual equal to --quality the centre view is the views "
-                   "sequence's key frame) or half-views (the same at half size, for the lowest rates)")
+    add_coding_options(p)
     hint = p.add_mutually_exclusive_group()
     hint.add_argument("--depth-hint", dest="depth_hint", action="store_true", default=True,
                       help="send the encoder's disparity estimate (the default)")
     hint.add_argument("--no-depth-hint", dest="depth_hint", action="store_false",
                       help="send only the JPEG centre view (fewest bits, flat reconstruction)")
-    p.add_argument("--hance-map", action="store_true",
-                   help="send a JPEG-Hance strength map with each JPEG centre view, measured by the encoder on "
-                   "the decoded light field (on key frames a decode, the network and a warp per strength: about "
-                   "0.15 s a 7x7x375x540 key frame on a 2-core CPU; a few ms the frames between); decoding with "
-                   "--hance auto (the default) or on then blends the network's correction by it")
     p.add_argument("--fps", type=float_in(1e-3, 10000), help="frame rate to record (default: the input's, else 30)")
     p.add_argument("--device", default="cpu", help="where the hint's plane sweep runs: cpu (the default) or cuda "
                    "(rate control, --bpp, sweeps on the cpu)")

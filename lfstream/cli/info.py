@@ -70,7 +70,7 @@ def describe_stream(path: Path, frames: int) -> dict:
     carries a JPEG-Hance strength map (its tiles), file bytes and bits per pixel of the
     light field."""
     from lfstream.codec.bitstream import CODEC_JPEG, CODEC_NAMES, read_header, read_packet
-    from lfstream.codec.jpeg import hance_map
+    from lfstream.codec.centre.jpeg import hance_map
 
     with open(path, "rb") as fh:
         header = read_header(fh)

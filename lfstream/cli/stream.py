@@ -5,10 +5,7 @@ from __future__ import annotations
 import argparse
 
 from lfstream.cli import _pipeline
-from lfstream.cli._common import add_read_options, float_in, int_in, path_arg, read_options
-from lfstream.codec.encoder import PRESETS
-from lfstream.codec.jpeg import QUALITY_RANGE
-from lfstream.codec.residual import RESIDUAL_MODES
+from lfstream.cli._common import add_coding_options, add_read_options, int_in, path_arg, read_options
 from lfstream.stream.config import TRANSPORTS
 
 #: Frames of the built-in clip ``lfstream stream`` streams without an input (``--frames``).
@@ -22,25 +19,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--transport", choices=TRANSPORTS, default="inproc",
                    help="how packets travel from encoder to decoder: in process, through a file, or over loopback TCP")
     p.add_argument("--to", help="HOST:PORT of an `lfstream serve`: send there instead of decoding here")
-    rate = p.add_mutually_exclusive_group()
-    rate.add_argument("--quality", type=int_in(QUALITY_RANGE), default=50, help="JPEG quality of the centre view")
-    rate.add_argument("--bpp", type=float_in(1e-5, 24), help="target bits per pixel: rate control on the first frame")
-    p.add_argument("--preset", choices=tuple(PRESETS), help="centre-view coding: fast (JPEG), balanced "
-                   "or best (AV1). Default: fast from 7x7 views up, AV1 below, and the views as one AV1 sequence "
-                   "where the first frame shows that warping cannot predict them; with --bpp, every preset "
-                   "(seconds on the first frame; --bpp with fast: the quick search, tens of ms)")
+    add_coding_options(p)
     p.add_argument("--no-depth-hint", action="store_true", help="send only the centre view")
-    p.add_argument("--residual", type=int_in(QUALITY_RANGE), metavar="Q",
-                   help="quality 1..100 of the residual layer: every view's prediction "
-                   "error coded as one AV1 sequence "
-                   "(more bits, quality that keeps rising with rate; default: none, --bpp decides itself)")
-    p.add_argument("--residual-mode", choices=RESIDUAL_MODES, default="prediction",
-                   help="what the residual layer codes: prediction (the default), views (the views themselves) "
-                   "or half-views (the views at half size)")
-    p.add_argument("--hance-map", action="store_true",
-                   help="send JPEG-Hance strength maps with the JPEG centre views (as encode --hance-map: the "
-                   "encoder measures the map on key frames, about 0.15 s each on a 2-core CPU); --hance auto then "
-                   "runs the network, blended by them")
     p.add_argument("--frames", type=int_in((1, 1 << 20)), default=None,
                    help=f"frames of the built-in clip (default {BUILTIN_FRAMES}; an input file takes --max-frames)")
     _pipeline.add_pipeline_options(p)

@@ -3,14 +3,15 @@
 Data flow, one module per step:
 
 - :mod:`~lfstream.codec.encoder`: the frame -> a :class:`~lfstream.codec.bitstream.Packet`
-  (the centre view by :mod:`~lfstream.codec.jpeg` or, in the ``balanced``/``best`` presets,
-  as an AV1 key frame by :mod:`~lfstream.codec.intra`; the depth hint by
+  (the centre view by :mod:`~lfstream.codec.centre.jpeg` or, in the ``balanced``/``best`` presets,
+  as an AV1 key frame by :mod:`~lfstream.codec.centre.av1`; the depth hint by
   :mod:`~lfstream.codec.hint`, per-view gains by :mod:`~lfstream.codec.gains`; on request
-  the JPEG-Hance strength map by :mod:`~lfstream.codec.hance`).
+  the JPEG-Hance strength map by :mod:`~lfstream.codec.centre.hance`).
 - :mod:`~lfstream.codec.bitstream`: the ``.lfs`` container (header, packets, limits, CRCs).
 - :mod:`~lfstream.codec.decoder`: packet -> light field (JPEG-Hance where it helps,
   disparity from the hint, flat or Depth-Net, the occlusion-aware warp of
-  :mod:`~lfstream.codec.warp`, the gains).
+  :mod:`~lfstream.codec.warp.cpu`, the gains).
+- :mod:`~lfstream.codec.api`: the entry points (encode, decode, iter_decode, decode_file).
 - :mod:`~lfstream.codec.rate`: rate control (preset, quality, hint precision for a bpp).
 - :mod:`~lfstream.codec.baseline`: the HEVC/AV1 pseudo-sequence the codec is judged against.
 
@@ -18,8 +19,9 @@ Importing this package does not import torch or compile kernels; the networks an
 numba warp load when first used.
 """
 
-from lfstream.codec.api import encode
+from lfstream.codec.api import decode, decode_file, encode, iter_decode
 from lfstream.codec.bitstream import Limits, Packet, StreamHeader
+from lfstream.codec.centre.jpeg import QUALITY_RANGE, decode_jpeg, encode_jpeg, jpeg_roundtrip
 from lfstream.codec.decoder import (
     BATCH_RANGE,
     DEPTH_MODES,
@@ -27,13 +29,9 @@ from lfstream.codec.decoder import (
     HANCE_MODES,
     DecodedFrame,
     Decoder,
-    decode,
-    decode_file,
-    iter_decode,
 )
 from lfstream.codec.encoder import ENCODER_NAME, Encoder, EncodeStats, encode_file, frames_of
 from lfstream.codec.hint import HintOptions
-from lfstream.codec.jpeg import QUALITY_RANGE, decode_jpeg, encode_jpeg, jpeg_roundtrip
 
 __all__ = [
     "BATCH_RANGE",

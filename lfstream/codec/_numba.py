@@ -43,7 +43,7 @@ _EXACT_BORROWED = dict(_EXACT, **_BORROW)  # (see _ROW_BORROWED)
 # costs equal _sweep_span's to the bit: fast-math without reassociation (and not inlined
 # into the caller, whose flags would apply), written in the order the compiler evaluates
 # _sweep_span with a zero weight; any other order moved hint maps by 2e-7 and changed the
-# stream bytes of three of the seven shared scenes. tests/codec/test_hint.py compares.
+# stream bytes of three of the seven shared scenes. tests/codec/hint/test_hint.py compares.
 _NO_REASSOC = dict(fastmath={"nnan", "ninf", "nsz", "arcp", "contract", "afn"}, cache=True, nogil=True)
 
 
@@ -52,7 +52,7 @@ _NO_REASSOC_BORROWED = dict(_NO_REASSOC, **_BORROW)  # (see _ROW_BORROWED)
 
 # The view axes' fit (lfstream.codec.hint.axes._fit_axes) on a few thousand flow samples. Its
 # numpy version made about sixty calls on small arrays, on the lane whose end the hint waits
-# for; these kernels give the same axes to the bit (tests/codec/test_hint.py). Samples are rows
+# for; these kernels give the same axes to the bit (tests/codec/hint/test_hint.py). Samples are rows
 # of ``flows``: ``(dy_0, dx_0, dy_1, dx_1, ...)``, one pair per view. fastmath lets the
 # per-sample sums vectorise (2 ns an element without it); they round like numpy's to well
 # under the float32 the axes are returned in.

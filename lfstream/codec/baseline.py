@@ -88,7 +88,7 @@ class PseudoSequenceCodec:
             rc = f"qp={int(round(quality))}" if constant_qp else f"crf={quality:.3f}"
             return {"preset": preset or "medium",
                     "x265-params": f"{rc}:keyint={gop}:min-keyint={gop}:scenecut=0:log-level=error:frame-threads=1"}
-        from lfstream.codec.intra import svt_options
+        from lfstream.codec.centre.av1 import svt_options
 
         return {"preset": preset or "8", "crf": str(int(round(quality))), "g": str(gop), **svt_options()}
 
@@ -124,7 +124,7 @@ def encode_views(lf: np.ndarray, codec: str = "hevc", quality: float = 34, order
     ph, pw = coded_size((h, w))
 
     if spec.encoder == "libsvtav1":
-        from lfstream.codec.intra import quiet_svt_log
+        from lfstream.codec.centre.av1 import quiet_svt_log
 
         quiet_svt_log()
 

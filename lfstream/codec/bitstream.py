@@ -1,7 +1,7 @@
 """The ``.lfs`` bitstream: a file header, then one packet per light-field frame.
 
 Version 1 layout (all integers little-endian); version 2 is the same layout with one more
-centre-view codec (``codec`` 2: an AV1 key frame, :mod:`lfstream.codec.intra`); version 3
+centre-view codec (``codec`` 2: an AV1 key frame, :mod:`lfstream.codec.centre.av1`); version 3
 adds the residual layer (:mod:`lfstream.codec.residual`): header flag bit 1 and one more
 length and payload per packet. A writer stamps the lowest version that expresses its
 stream, so a JPEG stream without a residual is still version 1 and version-1 readers keep

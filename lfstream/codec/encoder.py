@@ -1,5 +1,5 @@
 """The encoder (seed chapter 3): per frame, the centre view as a JPEG (or, in the
-``balanced`` and ``best`` presets, an AV1 key frame: :mod:`lfstream.codec.intra`); with the
+``balanced`` and ``best`` presets, an AV1 key frame: :mod:`lfstream.codec.centre.av1`); with the
 depth hint also the centre view's disparity (:mod:`lfstream.codec.hint`); per-view shading
 gains where the views differ in brightness (:mod:`lfstream.codec.gains`); optionally the
 residual layer, what the decoder's prediction misses in every other view
@@ -20,10 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_version, with_present
+from lfstream.codec.centre import CentreCoding, encode_centre
+from lfstream.codec.centre.av1 import AV1_MIN_VIEW, av1_fits
+from lfstream.codec.centre.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.gains import GainTracker, measure_gains, shading_present
 from lfstream.codec.hint import HintOptions, HintTracker
-from lfstream.codec.intra import AV1_MIN_VIEW, CentreCoding, av1_fits, encode_centre
-from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.workers import beside, completed
 from lfstream.errors import LFValueError
 from lfstream.io._fs import atomic_open
@@ -82,18 +83,18 @@ class Encoder:
             payload; :func:`lfstream.codec.residual.encode_views_keyed`): one intra frame,
             not two. Rate control always makes that choice.
         post_filter: measure which of the decoder's JPEG post-filters
-            (:data:`lfstream.codec.jpeg.POST_FILTERS`, and a black floor) suits the centre
+            (:data:`lfstream.codec.centre.jpeg.POST_FILTERS`, and a black floor) suits the centre
             view and name it in the JPEG; ``False`` leaves every frame at the default
             filter, the bytes of earlier versions.
         hance_map: send a JPEG-Hance strength map with the JPEG centre view
-            (:mod:`lfstream.codec.hance`): measured on the first frame and every hint key
+            (:mod:`lfstream.codec.centre.hance`): measured on the first frame and every hint key
             frame after it by decoding the frame, running the network and warping at each
             strength (the fast network on the CPU: about 0.15 s a 7x7x375x540 frame measured;
             the frames between only have their hint and gains read, to follow the stream). A
             decoder running JPEG-Hance (fast) then blends its correction by the map. JPEG
             centres without a residual layer only.
         device: where the hint's plane sweep runs: ``"cpu"`` (the kernels) or ``"cuda"``
-            (tensor operations, :mod:`lfstream.codec.sweep_batched`; the maps agree to float
+            (tensor operations, :mod:`lfstream.codec.hint.sweep_batched`; the maps agree to float
             rounding, so the bytes may differ in a rare hint cell).
     """
 
@@ -177,7 +178,7 @@ class Encoder:
         if self.residual is not None:
             meta["residual"] = residual_meta(int(self.residual), self.residual_speed, self.residual_mode)
         if self.hance_map:  # the network the maps are measured for: a decoder's hance "auto" runs it
-            from lfstream.codec.hance import HANCE_MAP_PRESET
+            from lfstream.codec.centre.hance import HANCE_MAP_PRESET
 
             meta["hance_map"] = HANCE_MAP_PRESET
         return StreamHeader(views=views, size=size, fps=fps, quality=int(self.quality), has_hint=self.depth_hint,
@@ -267,13 +268,13 @@ class Encoder:
         """``packet`` with the JPEG-Hance strength map in its JPEG (:attr:`hance_map`): a
         decoder without JPEG-Hance follows the stream (every packet, in stream order, so that
         delta hints and gains resolve), and on the first and every hint key interval's frame
-        decodes it and the map is measured (:func:`lfstream.codec.hance.measure_hance_map`);
+        decodes it and the map is measured (:func:`lfstream.codec.centre.hance.measure_hance_map`);
         the frames between repeat it."""
         from dataclasses import replace
 
+        from lfstream.codec.centre.hance import HANCE_MAP_PRESET, measure_hance_map
+        from lfstream.codec.centre.jpeg import with_hance_map
         from lfstream.codec.decoder import Decoder
-        from lfstream.codec.hance import HANCE_MAP_PRESET, measure_hance_map
-        from lfstream.codec.jpeg import with_hance_map
 
         frame = to_uint8(np.asarray(frame))
         if self._hance_reference is None:

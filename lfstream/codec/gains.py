@@ -306,7 +306,7 @@ def resize_taps(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray]:
     as OpenCV computes them (the source position in float32 from a double expression, the
     weights ``1 - f`` and ``f`` in float32, clamped at the ends): per output sample the two
     input indices ``(n_out, 2)`` int64 and their weights ``(n_out, 2)`` float32. The warp
-    kernel's gains use :func:`lfstream.codec.warp._linear_taps` instead, the same taps with
+    kernel's gains use :func:`lfstream.codec.warp.cpu._linear_taps` instead, the same taps with
     the weights computed in float64: they differ from these in the last bit for most sizes
     (375 of 4 cells: 181 of 375), and the hint path's decoded bytes follow those."""
     scale = 1.0 / (n_out / n_in)  # OpenCV's scale_x = 1 / inv_scale_x

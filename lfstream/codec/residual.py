@@ -6,7 +6,7 @@ view gets (bikes: 32.7 dB at 0.08 bpp where x265 reaches 34.1). The encoder runs
 decoder's own prediction, takes ``residual = view - prediction + 128`` (clipped to 8 bits)
 for every view but the centre and codes the residual views as one AV1 sequence (SVT-AV1,
 serpentine view order so neighbouring frames are neighbouring views; 4:2:0 BT.601 full
-range as :func:`lfstream.codec.intra.rgb_to_i420`). Measured on lytro_bikes at 0.08 bpp:
+range as :func:`lfstream.codec.centre.av1.rgb_to_i420`). Measured on lytro_bikes at 0.08 bpp:
 35.1 dB with the residual against 32.7 without (JPEG-coded residuals spent 0.3-0.8 bpp for
 less: per-view noise is what a residual mostly holds, and only inter prediction across
 views codes it cheaply).
@@ -52,9 +52,10 @@ import numpy as np
 
 from lfstream.codec.baseline import view_order
 from lfstream.codec.bitstream import CODEC_AV1
+from lfstream.codec.centre import CentreCoding
+from lfstream.codec.centre.av1 import i420_to_rgb, pad_to_even, rgb_to_i420, svtav1_encoder
+from lfstream.codec.centre.jpeg import QUALITY_RANGE
 from lfstream.codec.deadline import call_with_deadline, encoder_deadline
-from lfstream.codec.intra import CentreCoding, i420_to_rgb, pad_to_even, rgb_to_i420, svtav1_encoder
-from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.errors import BitstreamError, LFValueError
 
 RESIDUAL_FORMAT = 1  # view - prediction
@@ -301,7 +302,7 @@ def decode_residual(data: bytes, views: tuple[int, int], size: tuple[int, int],
         packets.append(data[pos:pos + n])
         pos += n
     ctx = av.CodecContext.create("libdav1d", "r")
-    from lfstream.codec.intra import max_av1_pixels
+    from lfstream.codec.centre.av1 import max_av1_pixels
 
     # dav1d refuses a frame larger than the coded views before allocating it
     ctx.options = {"max_pixels": str(max_av1_pixels((h, w)))}

@@ -8,7 +8,7 @@ import numpy as np
 
 from lfstream.codec._numba import _PARALLEL, _ROW_BORROWED
 
-# YCbCr -> RGB (BT.601 full range, the inverse of lfstream.codec.intra.rgb_to_i420) in
+# YCbCr -> RGB (BT.601 full range, the inverse of lfstream.codec.centre.av1.rgb_to_i420) in
 # 14-bit fixed point, as OpenCV's 8-bit conversion does
 _YCC_BITS = 14
 

@@ -23,332 +23,32 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from lfstream.errors import LFFileError, LFFormatError, LFMissingViewsError, LFShapeError, LFValueError
-from lfstream.io.images import IMAGE_EXTS, eight_bit, read_eslf, read_image
+from lfstream.errors import LFFileError, LFFormatError, LFShapeError, LFValueError
+from lfstream.io.arrays import _frame_range, _npy_header, _range_count, _read_array_file
+from lfstream.io.images import IMAGE_EXTS, read_eslf, read_image
+from lfstream.io.read_options import LoadedLF, ReadOptions
 from lfstream.io.video import VIDEO_EXTS, collect_frames, iter_video_frames, video_info
+from lfstream.io.view_files import (
+    _assemble_views,
+    _classify_folder,
+    _missing_views,
+    _present_mask,
+    _read_rgb_view,
+    _scan_view_files,
+)
 from lfstream.lightfield import (
-    MAX_VIEWS_PER_AXIS,
     check_crop,
-    check_first_frame,
-    check_lf,
     crop_views,
-    frames_in_range,
     from_mosaic,
 )
 
-_RE_RC = re.compile(r"^(\d+)_(\d+)$")
-_RE_HCI = re.compile(r"^input_Cam(\d{3})$")
-_RE_LYTRO = re.compile(r"^(.*?)_(\d{2})_(\d{2})$")
-
-
-@dataclass(frozen=True)
-class ReadOptions:
-    """How to interpret a light-field source (every reader takes the same options).
-
-    Attributes:
-        angular: microlens size in pixels of a lenslet (ESLF) image (Lytro Illum: 14; some
-            decoders write 15).
-        crop: keep the central ``crop x crop`` views.
-        grid: ``(U, V)`` of a mosaic image or mosaic video without stored metadata.
-        flip_u, flip_v: reverse the view rows / columns, for sources whose view order
-            disagrees with lfstream's (HCI) disparity convention.
-        allow_missing: load a folder with missing views, zero-filled, with ``present`` set;
-            without it missing views raise :class:`~lfstream.errors.LFMissingViewsError`.
-        max_frames: read at most this many frames of a video.
-        first_frame: the video's frame to start at (0: its first); the frames before it
-            are skipped, decoding as little of them as the format allows (an intra-only
-            video, such as an ``.avi``, decodes none; an ``.lfs`` stream only reads their
-            hints and gain maps). With ``max_frames``, a range.
-    """
-
-    angular: int | None = None
-    crop: int | None = None
-    grid: tuple[int, int] | None = None
-    flip_u: bool = False
-    flip_v: bool = False
-    allow_missing: bool = False
-    max_frames: int | None = None
-    first_frame: int = 0
-
-    def __post_init__(self) -> None:
-        check_first_frame(self.first_frame)
-        if self.max_frames is not None and (not isinstance(self.max_frames, (int, np.integer)) or self.max_frames < 1):
-            raise LFValueError(f"max_frames: a positive integer, got {self.max_frames!r}")
-        if self.crop is not None and (not isinstance(self.crop, (int, np.integer)) or self.crop < 1):
-            raise LFValueError(f"crop: a positive integer, got {self.crop!r}")
-
-
-
-@dataclass
-class LoadedLF:
-    """A light field read from disk together with what the source said about it.
-
-    Attributes:
-        lf: ``(U, V, H, W, 3)`` or ``(T, U, V, H, W, 3)``.
-        format: detected format name (``npy``, ``npz``, ``sai-folder``, ``eslf``, ``mosaic``,
-            ``video``, ``view-videos``, ``frames-folder``, ``lfs``).
-        path: the path read.
-        present: ``(U, V)`` bool mask of views that exist in the source, or ``None`` when
-            all are present. Missing views are zero in ``lf``.
-        weight: per-sample weight ``(U, V, H, W)`` float32 from a lenslet image's alpha
-            channel, or ``None``.
-        disparity: ground-truth disparity ``(U, V, H, W)`` or ``(T, U, V, H, W)`` if the
-            source carries one (``.npz`` from :mod:`lfstream.synth`).
-        fps: frame rate of video sources, else ``None``.
-    """
-
-    lf: np.ndarray
-    format: str
-    path: Path
-    present: np.ndarray | None = None
-    weight: np.ndarray | None = None
-    disparity: np.ndarray | None = None
-    fps: float | None = None
-
-    @property
-    def frames(self) -> int:
-        return int(self.lf.shape[0]) if self.lf.ndim == 6 else 1
-
-    @property
-    def views(self) -> tuple[int, int]:
-        return int(self.lf.shape[-5]), int(self.lf.shape[-4])
-
-    @property
-    def size(self) -> tuple[int, int]:
-        return int(self.lf.shape[-3]), int(self.lf.shape[-2])
-
-
-def _view_name_index(stem: str) -> tuple[str, int, int, str] | None:
-    """Parses a view file stem into (scheme, row, col, prefix); row/col 0-based (HCI: linear)."""
-    m = _RE_HCI.match(stem)
-    if m:
-        return "hci", int(m.group(1)), -1, ""
-    m = _RE_RC.match(stem)
-    if m:
-        return "rc", int(m.group(1)), int(m.group(2)), ""
-    m = _RE_LYTRO.match(stem)
-    if m:
-        return "lytro", int(m.group(2)) - 1, int(m.group(3)) - 1, m.group(1)
-    return None
-
-
-def _scan_view_files(folder: Path, exts: Sequence[str]) -> tuple[str, dict[tuple[int, int], Path], tuple[int, int]]:
-    """Finds the view files of a folder and their grid positions; returns (scheme, map, grid)."""
-    entries: dict[str, list[tuple[int, int, Path]]] = {}
-    for p in sorted(folder.iterdir()):
-        if not p.is_file() or p.suffix.lower() not in exts:
-            continue
-        parsed = _view_name_index(p.stem)
-        if parsed is None:
-            continue
-        scheme, r, c, _prefix = parsed
-        entries.setdefault(scheme, []).append((r, c, p))
-    if not entries:
-        raise LFFormatError(
-            f"{folder}: no view files named R_C, input_CamNNN or NAME_RR_CC with extension in {list(exts)}"
-        )
-    if len(entries) > 1:
-        raise LFFormatError(f"{folder}: mixes view naming schemes {sorted(entries)}")
-    scheme, items = next(iter(entries.items()))
-    if scheme == "hci":
-        # HCI numbers views row-major on an n x n grid; infer n from the largest index.
-        top = max(r for r, _, _ in items)
-        n = int(np.ceil(np.sqrt(top + 1)))
-        views = {(r // n, r % n): p for r, _, p in items}
-        grid = (n, n)
-    else:
-        views = {}
-        for r, c, p in items:
-            if r < 0 or c < 0:
-                raise LFFormatError(f"{p}: view index out of range")
-            if (r, c) in views:
-                raise LFFormatError(f"{folder}: two files for view ({r}, {c}): {views[(r, c)].name}, {p.name}")
-            views[(r, c)] = p
-        grid = (max(r for r, _ in views) + 1, max(c for _, c in views) + 1)
-    if max(grid) > MAX_VIEWS_PER_AXIS:
-        raise LFFormatError(f"{folder}: view grid {grid} exceeds the limit of {MAX_VIEWS_PER_AXIS} per axis")
-    return scheme, views, grid
-
-
-def _missing_message(folder: Path, missing: list[tuple[int, int]], grid: tuple[int, int]) -> str:
-    shown = ", ".join(f"({r},{c})" for r, c in missing[:12])
-    more = f" and {len(missing) - 12} more" if len(missing) > 12 else ""
-    return (
-        f"{folder}: {len(missing)} of {grid[0] * grid[1]} views of the {grid[0]}x{grid[1]} grid are missing: "
-        f"{shown}{more} (pass allow_missing=True / --allow-missing to load the present views with a mask)"
-    )
-
-
-#: Threads that decode a folder's view images (:func:`_assemble_views`).
-VIEW_READ_THREADS = min(4, os.cpu_count() or 1)
-
-
-def _assemble_views(
-    folder: Path,
-    views: dict[tuple[int, int], object],
-    grid: tuple[int, int],
-    load_view,
-    allow_missing: bool,
-) -> tuple[np.ndarray, np.ndarray | None]:
-    missing = _missing_views(folder, views, grid, allow_missing)
-    from concurrent.futures import ThreadPoolExecutor
-
-    lf: np.ndarray | None = None
-    first: tuple[tuple[int, ...], Path] | None = None  # the first view's shape and file
-    items = sorted(views.items())
-    # the views decoded on a few threads (OpenCV's decoders release the GIL): lytro_bikes'
-    # 49 PNGs 0.25 -> 0.14 s on two cores; each placed by its grid position
-    with ThreadPoolExecutor(max_workers=max(1, min(VIEW_READ_THREADS, len(items)))) as pool:
-        for ((r, c), src), img in zip(items, pool.map(load_view, [src for _, src in items])):
-            if first is None:
-                first = (img.shape, src)
-                lf = np.zeros(img.shape[:-3] + (grid[0], grid[1]) + img.shape[-3:], np.uint8)
-            elif img.shape != first[0]:
-                raise LFShapeError(f"{src}: view shape {img.shape} differs from {first[1]} {first[0]}")
-            lf[..., r, c, :, :, :] = img
-    assert lf is not None
-    return lf, _present_mask(views, grid) if missing else None
-
-
-def _missing_views(folder: Path, views: dict[tuple[int, int], object], grid: tuple[int, int],
-                   allow_missing: bool) -> list[tuple[int, int]]:
-    """The grid positions without a view; refused (:class:`LFMissingViewsError`) unless
-    ``allow_missing``."""
-    missing = [(r, c) for r in range(grid[0]) for c in range(grid[1]) if (r, c) not in views]
-    if missing and not allow_missing:
-        raise LFMissingViewsError(_missing_message(folder, missing, grid), missing)
-    return missing
-
-
-def _present_mask(views: dict[tuple[int, int], object], grid: tuple[int, int]) -> np.ndarray:
-    """The ``grid`` mask of the positions that have a view."""
-    present = np.zeros(grid, bool)
-    for r, c in views:
-        present[r, c] = True
-    return present
-
-
-def _read_rgb_view(p: Path) -> np.ndarray:
-    img = read_image(p)
-    return img[:, :, :3]
-
-
-_ARRAY_MAGIC = {".npy": (b"\x93NUMPY", "a NumPy .npy file"), ".npz": (b"PK", "a NumPy .npz (zip) archive")}
-
-
-def _npy_header(fh) -> tuple[tuple[int, ...], np.dtype]:
-    """The shape and dtype a ``.npy`` header declares (``fh`` at its magic; left after it)."""
-    version = np.lib.format.read_magic(fh)
-    read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-    shape, _, dtype = read_header(fh)
-    return shape, dtype
-
-
-def _check_declared_size(fh, available: int, name: str) -> None:
-    """Refuses an array whose header declares more data than its file holds (a truncated or
-    forged ``.npy``: numpy would first try to allocate what the header says, up to
-    petabytes). ``fh`` is at the array's magic; ``available``: its bytes, header included."""
-    shape, dtype = _npy_header(fh)
-    declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
-    if declared > available - fh.tell():
-        raise LFFormatError(f"{name}: its header declares a {'x'.join(map(str, shape))} {dtype} array ({declared} "
-                            f"bytes), the file holds {max(available - fh.tell(), 0)}: truncated or not an array file")
-
-
-def _read_array_file(path: Path, opts: ReadOptions = ReadOptions()) -> LoadedLF:
-    """A ``.npy`` or ``.npz`` light field, the frames of ``opts``' range only where it is a
-    video (a ``.npy``'s range copied out of the mapped file: the rest is never read)."""
-    magic, what = _ARRAY_MAGIC[path.suffix.lower()]
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(len(magic))
-    except OSError as exc:
-        raise LFFileError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-    if head != magic:
-        raise LFFormatError(f"{path}: not {what} ({'empty file' if not head else 'its first bytes are ' + repr(head)})")
-    try:
-        if path.suffix.lower() == ".npy":
-            with open(path, "rb") as fh:
-                _check_declared_size(fh, path.stat().st_size, str(path))
-            ranged = opts.first_frame > 0 or opts.max_frames is not None
-            lf = np.load(path, allow_pickle=False, mmap_mode="r" if ranged else None)
-            disparity = None
-            fmt = "npy"
-        else:
-            with np.load(path, allow_pickle=False) as z:
-                keys = list(z.keys())
-                if not keys:
-                    raise LFFormatError(f"{path}: empty .npz archive")
-                key = "lf" if "lf" in keys else keys[0]
-                for name in {key, "disparity"} & set(keys):
-                    member = z.zip.getinfo(f"{name}.npy")
-                    with z.zip.open(member) as fh:
-                        _check_declared_size(fh, member.file_size, f"{path} ({name})")
-                lf = z[key]
-                disparity = z["disparity"] if "disparity" in keys else None
-            fmt = "npz"
-    except (ValueError, OSError, EOFError, KeyError) as exc:
-        if isinstance(exc, LFFormatError):
-            raise
-        raise LFFormatError(f"{path}: not a readable {path.suffix} array ({exc})") from exc
-    # uint8, float in [0, 1], or 16-bit samples (taken to 8 bits as 16-bit images are); any
-    # other integer type's scale is a guess (uint16 ones were read as floats and saturated
-    # to white), so it is refused
-    if not isinstance(lf, np.ndarray) or not (lf.dtype == np.uint8 or lf.dtype == np.uint16 or lf.dtype.kind == "f"):
-        raise LFFormatError(f"{path}: {getattr(lf, 'dtype', type(lf))} samples; expected uint8, uint16 or float "
-                            "in [0, 1]")
-    try:
-        check_lf(lf, name=str(path))
-    except LFShapeError as exc:
-        raise LFFormatError(str(exc)) from exc
-    if lf.ndim == 6:
-        if disparity is not None and disparity.ndim in (3, 5) and len(disparity) == len(lf):
-            # a map per frame, every view's or the centre view's: the range's
-            disparity = _frame_range(disparity, opts, path)
-        lf = _frame_range(lf, opts, path)
-    if isinstance(lf, np.memmap) or (isinstance(lf.base, np.ndarray) and lf.size < lf.base.size):
-        # the range copied out of the mapped file (a .npy; a still whole), or out of the
-        # whole array (a .npz's member is read whole), which is then freed
-        lf = np.array(lf)
-    if lf.dtype == np.uint16:
-        lf = eight_bit(lf)
-    return LoadedLF(lf=lf, format=fmt, path=path, disparity=disparity)
-
-
-def _frame_range(frames, opts: ReadOptions, path: Path):
-    """The frames ``opts`` asks for (``first_frame``, ``max_frames``) of a ``(T, ...)`` array
-    (or a list)."""
-    _range_count(len(frames), opts, path)
-    stop = None if opts.max_frames is None else opts.first_frame + opts.max_frames
-    return frames[opts.first_frame:stop]
-
-
-def _classify_folder(folder: Path) -> str:
-    files = [p for p in folder.iterdir() if not p.name.startswith(".")]
-    if not files:
-        raise LFFormatError(f"{folder}: empty folder")
-    exts = {p.suffix.lower() for p in files if p.is_file()}
-    named = [p for p in files if p.is_file() and _view_name_index(p.stem) is not None]
-    if named and any(p.suffix.lower() in IMAGE_EXTS for p in named):
-        return "sai-folder"
-    if named and any(p.suffix.lower() in VIDEO_EXTS for p in named):
-        return "view-videos"
-    if any(p.is_dir() for p in files) or exts & {".npy", ".npz", ".lfs"} or exts & set(VIDEO_EXTS):
-        return "frames-folder"
-    raise LFFormatError(f"{folder}: no light-field files recognised (extensions found: {sorted(exts) or 'none'})")
-
-
-#: Formats whose decoder lives in a higher layer (the codec decodes ``.lfs``): imported by
-#: name when one is read (``lfstream.io`` does not import the codec); the function gives
-#: ``(frames iterator, header, count)``.
-_LAYERED_READERS = {".lfs": ("lfstream.codec.decoder", "lfs_frames")}
+_LAYERED_READERS = {".lfs": ("lfstream.codec.api", "lfs_frames")}
 #: What :func:`open_video_lf` reads frame by frame.
 LAZY_EXTS = VIDEO_EXTS + tuple(_LAYERED_READERS)
 
@@ -510,20 +210,6 @@ def open_video_lf(path: str | os.PathLike, options: ReadOptions | None = None, c
     return VideoLF(frames(), fps, count, tuple(views), tuple(size), path, present, damage)
 
 
-def _range_count(count: int | None, opts: ReadOptions, path: Path) -> int | None:
-    """How many frames a video of ``count`` frames gives read from ``opts.first_frame`` for at
-    most ``opts.max_frames`` (``None`` where the count is not known).
-
-    Raises:
-        LFValueError: the first frame asked for is past the video's end.
-    """
-    return frames_in_range(count, opts.first_frame, opts.max_frames, path) if count else count
-
-
-#: Decoder threads of each view's video in a folder of view videos: one decoder a view, all
-#: open at once (49 for 7x7), so FFmpeg's own choice (one a core, plus one) would start
-#: thousands of threads on a large machine; two let a view's decode overlap the next's.
-#: Two were as fast as FFmpeg's choice on two cores, for the same CPU time.
 VIEW_DECODER_THREADS = 2
 
 

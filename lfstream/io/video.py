@@ -399,7 +399,7 @@ def rgb_to_video_i420(img: np.ndarray, size: tuple[int, int] | None = None) -> n
     swscale produces for untagged video, luma within one level, chroma within two), padded
     by edge replication to
     ``size`` (even). Chroma is the 2 x 2 area mean, as swscale's.
-    (:func:`lfstream.codec.intra.rgb_to_i420` is the codec's own full-range conversion,
+    (:func:`lfstream.codec.centre.av1.rgb_to_i420` is the codec's own full-range conversion,
     which its decoder inverts.)
 
     Shape:

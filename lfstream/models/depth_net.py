@@ -14,7 +14,7 @@ for warping and the full-resolution layers dominate the CPU time.
 
 The ``fast`` preset is :class:`DepthRefiner`: a refiner that cannot lose. It takes the
 restored centre view and the decoded hint, and adds a correction to the per-view maps the
-decoder's own warp derives from the hint (:func:`lfstream.codec.warp.view_disparities`:
+decoder's own warp derives from the hint (:func:`lfstream.codec.warp.cpu.view_disparities`:
 splatted with a z-test, holes from the background side); its last layer starts at zero,
 so the untrained network decodes exactly what ``depth="hint"`` decodes.
 
@@ -298,7 +298,7 @@ def predict_view_disparities(centres: np.ndarray, model: nn.Module, views: tuple
                                "(encode with --depth-hint, or decode with --depth flat)")
         h = torch.from_numpy(np.ascontiguousarray(hints, np.float32)).to(device)[:, None]
     if isinstance(model, DepthRefiner):
-        from lfstream.codec.warp import view_disparities
+        from lfstream.codec.warp.cpu import view_disparities
 
         axes = list(axes) if axes is not None else [None] * len(centres)
         with inference_precision(str(x.device), precision):

@@ -37,7 +37,7 @@ class HanceConfig:
         stages: ``(channels, blocks)`` per stage; a 1x1 conv changes the width between stages.
         norm: normalisation in the blocks (``"batch"``, ``"instance"``, ``"none"``).
         after_deblock: the network restores the decoder's post-filtered JPEG
-            (:func:`lfstream.codec.jpeg.deblock_jpeg`) rather than the plain decoded one; the
+            (:func:`lfstream.codec.centre.jpeg.deblock_jpeg`) rather than the plain decoded one; the
             decoder filters first when this is set.
         strength: the share of its trained correction the network applies (the correction
             is trained at 1 and scaled by this where it runs: a network trained on three

@@ -1,6 +1,6 @@
 """Differentiable view synthesis on any torch device (training losses, GPU paths).
 
-The same model as :mod:`lfstream.codec.warp` (``L(x, u) = C(x + (u - u0) d(x, u))``,
+The same model as :mod:`lfstream.codec.warp.cpu` (``L(x, u) = C(x + (u - u0) d(x, u))``,
 lfstream's disparity sign, border clamping) through ``grid_sample``; the decoder's
 occlusion-aware CPU warp is tested to agree with it where no occlusion occurs.
 """

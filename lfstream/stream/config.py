@@ -8,9 +8,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from lfstream.codec.decoder import DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
+from lfstream.codec.centre.jpeg import QUALITY_RANGE
+from lfstream.codec.decoder import BATCH_RANGE, DEPTH_MODES, HANCE_MODES, NETWORK_PRESETS
 from lfstream.codec.encoder import DEFAULT_PRESET, PRESETS, Encoder
-from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.residual import RESIDUAL_MODES
 from lfstream.errors import LFValueError
 from lfstream.optics import PlenopticCamera
@@ -24,8 +24,7 @@ TRANSPORTS = ("inproc", "file", "tcp")
 #: one video stepping through the planes; lf: the reconstructed light field
 #: (``reconstructed.avi``, a lossless Ut Video mosaic).
 SAVE_KINDS = ("mp4", "mp4-lossless", "png", "sweep", "lf")
-#: Frames per network batch in the stream's decoder, and bounded-queue sizes.
-BATCH_RANGE = (1, 64)
+#: Bounded-queue sizes (frames a queue between two stages holds).
 QUEUE_RANGE = (1, 256)
 
 
@@ -78,16 +77,11 @@ class StreamConfig:
     save: tuple[str, ...] = ("mp4",)
     skip_static: bool = True
     static_threshold: float = 0.5
-    # off by default: measured on 7x7x375x540, the half-resolution path is no faster than the
-    # numba SaS of the same planes (resizing 49 views costs what it saves); see the summary
-    skip_planes: bool = False
-    plane_margin: float = 0.5
     # MSSIM (and the focal stack's PSNR against the input's) on frames 0, N, 2N, ...: 0.2 s
     # of the metrics stage per 7x7x375x540 frame, so sampled once a second of 30 fps video
     # (MPSNR is cheap: every frame); the summary's mssim_frames lists the frames measured
     mssim_every: int = 30
     metrics: bool = True
-    sink_delay_s: float = 0.0  # an artificially slow sink (backpressure benchmarks)
     fps: float = 30.0
     # the capturing camera, when known: each focal plane then records its refocus distance
     camera: PlenopticCamera | None = None
@@ -136,8 +130,8 @@ class StreamConfig:
             raise LFValueError(f"save: each of {', '.join(SAVE_KINDS)}, got {bad}")
         check_range("batch", self.batch, BATCH_RANGE)
         check_range("queue size", self.queue_size, QUEUE_RANGE)
-        if self.mssim_every < 0 or self.static_threshold < 0 or self.sink_delay_s < 0:
-            raise LFValueError("mssim_every, static_threshold and sink_delay_s must be >= 0")
+        if self.mssim_every < 0 or self.static_threshold < 0:
+            raise LFValueError("mssim_every and static_threshold must be >= 0")
         if not 0 < self.fps <= 10000:
             raise LFValueError(f"fps: in (0, 10000], got {self.fps!r}")
         from lfstream.models.device import check_device
@@ -145,5 +139,5 @@ class StreamConfig:
         check_device(self.device)
 
 
-__all__ = ["StreamConfig", "FOCUS_MODES", "REFOCUS_MODES", "TRANSPORTS", "SAVE_KINDS", "BATCH_RANGE", "QUEUE_RANGE",
+__all__ = ["StreamConfig", "FOCUS_MODES", "REFOCUS_MODES", "TRANSPORTS", "SAVE_KINDS", "QUEUE_RANGE",
            "check_range", "check_choice"]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -24,7 +24,6 @@ class StackFrame:
     seq: int
     decoded: DecodedFrame
     stack: np.ndarray | None = None  # (K, H, W, 3) uint8
-    cheap_planes: list[int] = field(default_factory=list)
     slopes: np.ndarray | None = None  # (K,) the planes the stack was rendered at
 
 

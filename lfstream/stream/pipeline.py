@@ -11,15 +11,11 @@ Skips (each switchable, each reported in the summary with what it saved and cost
   (a) ``skip_static``: a frame whose decoded centre view differs from the previous one by
       less than ``static_threshold`` (mean absolute 8-bit levels) reuses the previous
       frame's disparity (no hint decoding / Depth-Net);
-  (b) ``skip_planes`` (off by default, see :class:`StreamConfig`): focal planes whose slope lies
-      outside the scene's disparity range
-      (1st..99th percentile of the decoded disparity, widened by ``plane_margin``) are
-      rendered by a cheap path (shift-and-sum at half resolution, upsampled) and flagged;
-  (c) JPEG-Hance runs only where it was measured to help (the decoder's ``hance="auto"``:
+  (b) JPEG-Hance runs only where it was measured to help (the decoder's ``hance="auto"``:
       at JPEG qualities up to a preset's threshold, the fast preset on a CUDA device only;
       on any device, a stream with the encoder's strength maps, ``hance_map``, blended by
-      them; elsewhere the classical post-filter :func:`lfstream.codec.jpeg.deblock_jpeg`);
-  (d) rendering the focal stack straight from centre view + disparity is not offered: each
+      them; elsewhere the classical post-filter :func:`lfstream.codec.centre.jpeg.deblock_jpeg`);
+  (c) rendering the focal stack straight from centre view + disparity is not offered: each
       plane would need one scattered (gathered) sample of the centre per view and pixel,
       13 x 49 per pixel for the default planes of a 7x7 grid (~130 M scalar gathers, over a
       second on the development CPU), where the fused warp gathers once per view and pixel
@@ -43,9 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
+from lfstream.errors import LFValueError
 from lfstream.lightfield import axes_as_list
 from lfstream.stream.config import StreamConfig
-from lfstream.stream.report import PlaneSkipStats, QualityStats, RateStats, StageStats, StaticSkipStats, build_summary
+from lfstream.stream.report import QualityStats, RateStats, StageStats, StaticSkipStats, build_summary
 from lfstream.stream.sinks import Sink
 from lfstream.stream.stages import (
     DecoderStage,
@@ -97,6 +94,8 @@ class Pipeline:
             (:attr:`lfstream.stream.Source.prepare`: rendering the built-in clip into its
             cache), run on a thread beside the kernels' warm-up and waited for (its time is
             in the summary's ``warmup_s``); given an event set when the run is stopped.
+        sink_delay_s: seconds the sink waits on each frame: a slow consumer, for tests and
+            benchmarks of the bounded queues' backpressure (0: none).
 
     Attributes:
         stats: per stage name, its :class:`~lfstream.stream.report.StageStats` (live while running).
@@ -106,9 +105,12 @@ class Pipeline:
                  sender: Sender | None = None, receiver: Receiver | None = None,
                  progress: Callable[[str], None] | None = None, stream_file: Path | None = None,
                  total_frames: int | None = None, present: np.ndarray | None = None,
-                 prepare: Callable[[threading.Event], object] | None = None) -> None:
+                 prepare: Callable[[threading.Event], object] | None = None, sink_delay_s: float = 0.0) -> None:
         config.validate()
+        if sink_delay_s < 0:
+            raise LFValueError(f"sink_delay_s: >= 0, got {sink_delay_s!r}")
         self.config = config
+        self.sink_delay_s = sink_delay_s
         self.source = source
         self.out = out
         self.sender = sender
@@ -207,7 +209,7 @@ class Pipeline:
             decoder = DecoderStage(ctl, self.stats["decoder"], recv_channel, self.queues["refocus"], cfg)
             refocus = RefocusStage(ctl, self.stats["refocus"], self.queues["refocus"], self.queues["sink"], cfg)
             sink = SinkStage(ctl, self.stats["sink"], self.queues["sink"], self.queues["metrics"] if want_metrics else None,
-                             Sink(self.out, cfg) if self.out is not None else None, cfg.sink_delay_s)
+                             Sink(self.out, cfg) if self.out is not None else None, self.sink_delay_s)
             stages += [decoder, refocus, sink]
             if want_metrics:
                 metrics = MetricsStage(ctl, self.stats["metrics"], self.queues["metrics"], originals, cfg, self.present)
@@ -255,7 +257,6 @@ class Pipeline:
             coding=encoder.coding() if encoder is not None else None,
             quality=metrics.quality if metrics is not None else QualityStats(),
             static=decoder.static if decoder is not None else StaticSkipStats(enabled=cfg.skip_static),
-            planes=refocuser.skips if refocuser is not None else PlaneSkipStats(enabled=cfg.skip_planes),
             receive=receive,
             transport="tcp" if self.sender is not None or self.receiver is not None else cfg.transport,
             refocus={"method": refocuser.method, "why": refocuser.reason, "view_axes": axes_as_list(refocus.view_axes)}

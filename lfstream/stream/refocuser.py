@@ -6,14 +6,12 @@ from __future__ import annotations
 import json
 import time
 
-import cv2
 import numpy as np
 
 from lfstream.codec.decoder import DecodedFrame
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.optics import SEED_ALPHAS, slopes_from_alphas
 from lfstream.stream.config import StreamConfig
-from lfstream.stream.report import PlaneSkipStats
 
 #: Consecutive frames whose disparity range leaves the planes' range before they move.
 REFIT_AFTER_FRAMES = 3
@@ -40,7 +38,6 @@ class Refocuser:
         self._outside = 0
         self.method = config.refocus
         self.reason = "requested"
-        self.skips = PlaneSkipStats(enabled=config.skip_planes)
 
     def fit_planes(self, f: DecodedFrame) -> None:
         """Auto focus: fit the planes on the first frame, refit when the scene left them."""
@@ -130,48 +127,17 @@ class Refocuser:
         return "|".join(str(x) for x in (self.config.device, lf.shape, np.round(self.slopes, 6).tolist(), __version__,
                                          torch.__version__, torch.get_num_threads(), entry.get("sha256")))
 
-    def render(self, f: DecodedFrame, lf: np.ndarray | None = None) -> tuple[np.ndarray | None, list[int]]:
-        """The focal stack ``(K, H, W, 3)`` uint8 of a decoded frame and the planes rendered
-        cheaply; ``lf``: the frame's views to refocus where not ``f.lf`` (reordered to the
-        convention's grid, :func:`lfstream.lightfield.canonical_views`)."""
+    def render(self, f: DecodedFrame, lf: np.ndarray | None = None) -> np.ndarray | None:
+        """The focal stack ``(K, H, W, 3)`` uint8 of a decoded frame (``None``: no refocusing);
+        ``lf``: the frame's views to refocus where not ``f.lf`` (reordered to the convention's
+        grid, :func:`lfstream.lightfield.canonical_views`)."""
         from lfstream.refocus import focal_stack
 
         if self.method == "none":
-            return None, []
+            return None
         lf = f.lf if lf is None else lf
-        if self.method in ("refnet", "fourier") or not self.config.skip_planes:
-            extra = {"device": self.config.device} if self.method == "refnet" else {}
-            return focal_stack(lf, slopes=self.slopes, method=self.method, **extra), []
-        d = f.disparity
-        lo, hi = (np.percentile(d, [1, 99]) if d.size else (0.0, 0.0))
-        margin = self.config.plane_margin
-        inside = (self.slopes >= lo - margin) & (self.slopes <= hi + margin)
-        out = np.empty((len(self.slopes), *lf.shape[2:]), np.uint8)
-        if inside.any():
-            out[inside] = focal_stack(lf, slopes=self.slopes[inside])
-        cheap = np.flatnonzero(~inside).tolist()
-        if cheap:
-            h, w = lf.shape[2:4]
-            t0 = time.perf_counter()
-            small = np.stack([[cv2.resize(view, (max(1, w // 2), max(1, h // 2)), interpolation=cv2.INTER_AREA)
-                               for view in row] for row in lf])
-            rough = focal_stack(small, slopes=self.slopes[~inside] / 2.0)
-            for k, img in zip(cheap, rough):
-                out[k] = cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR)
-            t_cheap = time.perf_counter() - t0
-            sk = self.skips
-            if sk.error_db is None:
-                # audit once: the exact planes, to report the error and time the skip costs/saves
-                from lfstream.metrics import psnr
-
-                t0 = time.perf_counter()
-                exact = focal_stack(lf, slopes=self.slopes[~inside])
-                t_exact = time.perf_counter() - t0
-                sk.error_db = float(np.mean(np.minimum(psnr(exact, out[cheap]), 100.0)))
-                sk.saved_per_plane_s = max(t_exact - t_cheap, 0.0) / len(cheap)
-            sk.planes += len(cheap)
-            sk.saved_s += (sk.saved_per_plane_s or 0.0) * len(cheap)
-        return out, cheap
+        extra = {"device": self.config.device} if self.method == "refnet" else {}
+        return focal_stack(lf, slopes=self.slopes, method=self.method, **extra)
 
 
 _CHOICES = "refocus-choices.json"

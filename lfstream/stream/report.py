@@ -68,21 +68,6 @@ class StaticSkipStats:
 
 
 @dataclass
-class PlaneSkipStats:
-    """Skip (b): focal planes outside the scene's disparity range rendered cheaply (refocus thread)."""
-
-    enabled: bool
-    planes: int = 0
-    saved_s: float = 0.0
-    error_db: float | None = None  # audited once against the exact planes
-    saved_per_plane_s: float | None = None
-
-    def as_dict(self) -> dict:
-        return {"enabled": self.enabled, "planes": self.planes, "saved_s": round(self.saved_s, 4),
-                "error_psnr_db_vs_exact": self.error_db}
-
-
-@dataclass
 class QualityStats:
     """Decoded frames against the input (metrics thread)."""
 
@@ -93,7 +78,7 @@ class QualityStats:
 
 def build_summary(*, wall_s: float, warmup_s: float = 0.0, process_cpu_s: float | None = None, frames: int,
                   stages: dict[str, StageStats], rate: RateStats,
-                  quality: QualityStats, static: StaticSkipStats, planes: PlaneSkipStats,
+                  quality: QualityStats, static: StaticSkipStats,
                   receive: dict | None, transport: str, refocus: dict | None, hance: dict,
                   interrupted: bool, outputs: list[str], focal_planes: list[dict] | None = None,
                   plane_updates: list[dict] | None = None, coding: dict | None = None) -> dict:
@@ -120,7 +105,7 @@ def build_summary(*, wall_s: float, warmup_s: float = 0.0, process_cpu_s: float 
         "refocus": refocus,
         "planes": focal_planes or [],  # index, slope, alpha of every focal plane (as at the end)
         "plane_updates": plane_updates or [],  # frame and slopes each time the planes were fitted
-        "skips": {"static_frames": static.as_dict(), "out_of_range_planes": planes.as_dict(), "jpeg_hance": hance},
+        "skips": {"static_frames": static.as_dict(), "jpeg_hance": hance},
         "interrupted": interrupted,
         "outputs": outputs,
     }
@@ -142,7 +127,7 @@ def stopped_summary(transport: str) -> dict:
     """The summary of a run stopped (Ctrl-C) before any stage ran: the same keys as every
     summary, nothing done, ``interrupted`` true."""
     return build_summary(wall_s=0.0, frames=0, stages={}, rate=RateStats(), quality=QualityStats(),
-                         static=StaticSkipStats(enabled=False), planes=PlaneSkipStats(enabled=False), receive=None,
+                         static=StaticSkipStats(enabled=False), receive=None,
                          transport=transport, refocus=None,
                          hance={"mode": None, "networks": None, "ran": False, "precision": None},
                          interrupted=True, outputs=[])
@@ -160,5 +145,5 @@ def stderr_progress(line: str) -> None:
     sys.stderr.flush()
 
 
-__all__ = ["StageStats", "RateStats", "StaticSkipStats", "PlaneSkipStats", "QualityStats", "build_summary",
+__all__ = ["StageStats", "RateStats", "StaticSkipStats", "QualityStats", "build_summary",
            "stopped_summary", "write_summary", "stderr_progress"]

@@ -377,8 +377,8 @@ class RefocusStage(ConsumerStage):
             self.refocuser.choose(lf)
         else:
             self.refocuser.fit_planes(f)
-        stack, cheap = self.refocuser.render(f, lf)
-        return StackFrame(f.seq, f, stack, cheap, self.refocuser.slopes.copy())
+        stack = self.refocuser.render(f, lf)
+        return StackFrame(f.seq, f, stack, self.refocuser.slopes.copy())
 
 
 class SinkStage(ConsumerStage):

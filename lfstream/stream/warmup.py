@@ -47,8 +47,8 @@ def warmup_lf() -> np.ndarray:
 
 #: The modules whose numba kernels a stream compiles: their source stamps key the marker
 #: that says they were compiled here before (:func:`_compiled_marker`).
-KERNEL_MODULES = ("codec/_numba.py", "codec/warp_kernels.py", "codec/splat_kernels.py", "codec/hint/kernels.py",
-                  "codec/gains_kernels.py", "codec/residual_kernels.py", "codec/hance_kernels.py", "codec/_entropy.py",
+KERNEL_MODULES = ("codec/_numba.py", "codec/warp/kernels.py", "codec/warp/splat_kernels.py", "codec/hint/kernels.py",
+                  "codec/gains_kernels.py", "codec/residual_kernels.py", "codec/centre/hance_kernels.py", "codec/_entropy.py",
                   "refocus/_kernels.py", "_kernels.py")
 
 
@@ -105,7 +105,7 @@ def compile_warp_and_focal_stack(warp: bool = True, focal: bool = True) -> None:
     decoder and refocus stage give them, so that numba compiles and caches those kernels
     (what :func:`compile_beside`'s child does; tests/stream checks the stream then compiles
     neither again)."""
-    from lfstream.codec.warp import warp_views
+    from lfstream.codec.warp.cpu import warp_views
     from lfstream.refocus import focal_stack
 
     lf = warmup_lf()

@@ -522,7 +522,7 @@ def test_info_describes_videos_and_streams_without_decoding_them(capsys, tmp_pat
     the frames; nothing is decoded, and the answer is what describing the loaded light
     field gives."""
     import lfstream
-    import lfstream.codec.decoder as decoder
+    import lfstream.codec.api as decoder
     import lfstream.io.readers as readers
     import lfstream.io.video as video
     from lfstream.cli.info import describe
@@ -629,7 +629,7 @@ def test_a_video_whose_size_does_not_fit_the_grid_is_refused_before_streaming(ca
 def test_encode_hance_map_sends_strength_maps_and_refuses_rate_control(capsys, tmp_path):
     import lfstream
     from lfstream.codec.bitstream import split_stream
-    from lfstream.codec.jpeg import hance_map
+    from lfstream.codec.centre.jpeg import hance_map
 
     lf = synth_clip(2, 5, (48, 64), seed=6).lf
     np.save(tmp_path / "lf.npy", lf)

@@ -55,7 +55,7 @@ def test_encode_is_deterministic_and_decodes(clip, stream):
     # the centre view is exactly the JPEG (q60) of the input's centre view, post-filtered
     # with the filter the encoder named in it
     from lfstream.codec import decode_jpeg, encode_jpeg
-    from lfstream.codec.jpeg import PostFilterChoice, post_filter_jpeg, with_post_filter
+    from lfstream.codec.centre.jpeg import PostFilterChoice, post_filter_jpeg, with_post_filter
 
     for t, packet in enumerate(split_stream(stream)[1]):
         assert with_post_filter(packet.image, PostFilterChoice()) == encode_jpeg(clip[t, 2, 2], 60)
@@ -82,7 +82,7 @@ def test_decode_fills_one_array_with_the_frames_it_gives_apart(stream, monkeypat
     the same bytes as the frames decoded one by one, the frames contiguous in one buffer;
     where the counted frames would take too much memory it decodes them apart and stacks
     them, with the same bytes."""
-    from lfstream.codec import decoder as decoder_module
+    from lfstream.codec import api as decoder_module
 
     apart = np.stack([f.lf for f in decoder_module.iter_decode(io.BytesIO(stream))])
     whole = decode(stream)

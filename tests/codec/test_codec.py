@@ -10,7 +10,7 @@ import torch
 import lfstream
 from lfstream.cli import main
 from lfstream.codec.hint import HintOptions, decode_hint, disparity_errors, encode_hint, estimate_disparity
-from lfstream.codec.warp import warp_views
+from lfstream.codec.warp.cpu import warp_views
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.metrics import capped, mpsnr, mssim, psnr
 from lfstream.models.warp import warp_views_torch
@@ -267,7 +267,7 @@ def test_hance_auto_on_cpu_leaves_the_fast_network_off_and_on_filters_first(monk
 
     from lfstream.codec import Decoder
     from lfstream.codec.bitstream import iter_packets, read_header
-    from lfstream.codec.jpeg import PostFilterChoice, decode_jpeg, post_filter_jpeg, with_post_filter
+    from lfstream.codec.centre.jpeg import PostFilterChoice, decode_jpeg, post_filter_jpeg, with_post_filter
 
     clip = synth_clip(1, 3, (64, 80), seed=4, motion=0)
     data = lfstream.encode(clip.lf, depth_hint=False)
@@ -299,8 +299,8 @@ def test_depth_net_frames_keep_their_own_disparity_though_the_maps_array_is_reus
     writes into a given array and refuses one it cannot write (the warp's check of its `out`)."""
     import io
 
-    from lfstream.codec.decoder import iter_decode
-    from lfstream.codec.warp import view_disparities
+    from lfstream.codec.api import iter_decode
+    from lfstream.codec.warp.cpu import view_disparities
 
     clip = synth_clip(3, 5, (48, 64), seed=12, motion=0.8, camera_pan=0.3)
     data = lfstream.encode(clip.lf, depth_hint=True)
@@ -343,7 +343,7 @@ def test_decode_with_networks_and_switches(tmp_path):
 
 
 def test_decode_of_one_frame_is_the_decoded_frame_without_a_copy():
-    from lfstream.codec.decoder import iter_decode, stack_frames
+    from lfstream.codec.api import iter_decode, stack_frames
 
     clip = synth_clip(2, 3, (24, 32), seed=5).lf
     one = lfstream.encode(clip[0])

@@ -302,7 +302,7 @@ def test_apply_gains_equals_its_reference_and_opencv_within_a_level(views, size,
 @pytest.mark.parametrize("shape", [(3, 3, 2, 2), (3, 2, 2, 2, 3), (3, 3, 2, 2, 2), (3, 3, 0, 2, 3)])
 def test_apply_gains_refuses_maps_that_do_not_match_the_views(shape):
     from lfstream.codec.gains import apply_gains
-    from lfstream.codec.warp import warp_views
+    from lfstream.codec.warp.cpu import warp_views
     from lfstream.errors import LFShapeError
 
     lf = np.zeros((3, 3, 8, 10, 3), np.uint8)

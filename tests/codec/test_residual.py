@@ -203,7 +203,7 @@ def test_cli_encode_residual(tmp_path, clip, capsys):
 @pytest.mark.parametrize("quality,fmt_name", [(60, "VIEWS_KEYED_FORMAT"), (70, "VIEWS_FORMAT")])
 def test_views_residual_carries_the_views_themselves(clip, quality, fmt_name):
     from lfstream.codec import residual as residual_module
-    from lfstream.codec.intra import decode_centre
+    from lfstream.codec.centre import decode_centre
     from lfstream.codec.residual import residual_mode
 
     # one quality for the centre and the views: the centre is the sequence's key frame
@@ -240,7 +240,7 @@ def test_views_residual_carries_the_views_themselves(clip, quality, fmt_name):
 
 
 def test_keyed_views_sequence_costs_one_intra_frame():
-    from lfstream.codec.intra import decode_av1, encode_av1
+    from lfstream.codec.centre.av1 import decode_av1, encode_av1
     from lfstream.codec.residual import VIEWS_KEYED_FORMAT, encode_residual, encode_views_keyed
     from lfstream.metrics import psnr
 
@@ -446,7 +446,7 @@ def test_a_residual_stream_decodes_into_the_video_array_as_frame_by_frame(coded)
     there: the same bytes as the frames decoded one by one."""
     import io
 
-    from lfstream.codec.decoder import iter_decode
+    from lfstream.codec.api import iter_decode
 
     apart = [f.lf for f in iter_decode(io.BytesIO(coded))]
     np.testing.assert_array_equal(decode(coded), np.stack(apart))
@@ -456,9 +456,9 @@ def test_a_residual_stream_decodes_into_the_video_array_as_frame_by_frame(coded)
 def test_the_fastest_presets_at_quality_100_write_sequences_that_decode(speed):
     """SVT-AV1 presets 11-13 at CRF 1-4 wrote sequences of real views that dav1d refused
     (seahorse's views, keyed views and prediction residuals at qualities 95-100): those
-    presets' lowest CRF is raised (lfstream.codec.intra.svt_crf)."""
+    presets' lowest CRF is raised (lfstream.codec.centre.av1.svt_crf)."""
     import lfstream
-    from lfstream.codec.intra import SVT_FAST_MIN_CRF, svt_crf
+    from lfstream.codec.centre.av1 import SVT_FAST_MIN_CRF, svt_crf
     from lfstream.codec.residual import decode_residual, encode_residual, encode_views_keyed
     from tests.conftest import shared
 

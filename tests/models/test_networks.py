@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from lfstream.codec import jpeg_roundtrip
-from lfstream.codec.warp import warp_views, warp_views_per_view
+from lfstream.codec.warp.cpu import warp_views, warp_views_per_view
 from lfstream.errors import LFShapeError, LFValueError, WeightsError
 from lfstream.lightfield import view_offsets
 from lfstream.metrics import mpsnr, psnr, ssim

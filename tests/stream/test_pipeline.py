@@ -152,7 +152,7 @@ def _endless(frame):
 def test_stop_is_prompt_and_backpressure_bounds_the_producer(tmp_path):
     frame = next(iter(small_source(frames=1)))
     out = prepare_output_dir(tmp_path / "stop")
-    pipe = Pipeline(_endless(frame), StreamConfig(refocus="sas", sink_delay_s=0.05, queue_size=2, metrics=False), out)
+    pipe = Pipeline(_endless(frame), StreamConfig(refocus="sas", queue_size=2, metrics=False), out, sink_delay_s=0.05)
     threading.Timer(1.5, pipe.stop).start()
     t0 = time.perf_counter()
     summary = pipe.run()
@@ -477,9 +477,9 @@ def test_warm_up_loads_every_kernel_the_stream_calls(monkeypatch, read_only):
     import lfstream.stream.warmup as warmup
 
     calls: list[tuple[str, tuple]] = []
-    for name in ("lfstream._kernels", "lfstream.codec.warp_kernels", "lfstream.codec.splat_kernels",
+    for name in ("lfstream._kernels", "lfstream.codec.warp.kernels", "lfstream.codec.warp.splat_kernels",
                  "lfstream.codec.hint.kernels", "lfstream.codec.gains_kernels", "lfstream.codec.residual_kernels",
-                 "lfstream.codec.hance_kernels", "lfstream.refocus._kernels"):
+                 "lfstream.codec.centre.hance_kernels", "lfstream.refocus._kernels"):
         module = importlib.import_module(name)
         for attr, fn in list(vars(module).items()):
             if isinstance(fn, numba.core.registry.CPUDispatcher):
@@ -540,7 +540,7 @@ def test_a_stream_with_strength_maps_sends_them_and_its_decoder_runs_the_network
     to 1e-6 dB), not ``"off"``; refused with rate control or a coding the maps do not go with."""
     import lfstream
     from lfstream.codec.bitstream import split_stream
-    from lfstream.codec.jpeg import hance_map
+    from lfstream.codec.centre.jpeg import hance_map
     from lfstream.metrics import mpsnr
 
     frames = list(synthetic_source(frames=2, views=7, size=(48, 64), seed=6, cache=False))
@@ -651,7 +651,7 @@ def test_the_child_compiles_the_warp_and_focal_stack_the_stream_calls(monkeypatc
     import lfstream.stream.warmup as warmup
 
     calls: list[tuple[str, tuple]] = []
-    for name, attr in (("lfstream.codec.warp_kernels", "warp_all_views"), ("lfstream.refocus._kernels", "shift_sum_separable")):
+    for name, attr in (("lfstream.codec.warp.kernels", "warp_all_views"), ("lfstream.refocus._kernels", "shift_sum_separable")):
         module = importlib.import_module(name)
         fn = getattr(module, attr)
 

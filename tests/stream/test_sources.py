@@ -27,7 +27,7 @@ def test_an_lfs_streams_frame_by_frame_as_it_decodes(tmp_path, monkeypatch):
     (the hint's parallax), with the reading options applied; the whole stream is not decoded
     before the first frame is handed on."""
     import lfstream
-    import lfstream.codec.decoder as decoder
+    import lfstream.codec.api as decoder
     from lfstream.synth import synth_clip
 
     clip = synth_clip(3, 5, (32, 40), seed=6).lf

@@ -18,7 +18,7 @@ from lfstream.lightfield import check_lf, to_uint8, view_offsets
 
 def sweeps_on_device(device: str | None) -> bool:
     """Whether a sweep on ``device`` runs as tensor operations
-    (:func:`lfstream.codec.sweep_batched.sweep_batched`: a CUDA device) rather than the CPU
+    (:func:`lfstream.codec.hint.sweep_batched.sweep_batched`: a CUDA device) rather than the CPU
     kernels (``None`` or ``"cpu"``)."""
     return device is not None and str(device).startswith("cuda")
 
@@ -37,7 +37,7 @@ def _sweep(images: np.ndarray, offsets: np.ndarray, lo: float, hi: float, scale:
     n = max(n, 3)
     cands = (lo + step * np.arange(n)).astype(np.float32)
     if sweeps_on_device(device):
-        from lfstream.codec.sweep_batched import sweep_batched
+        from lfstream.codec.hint.sweep_batched import sweep_batched
 
         return sweep_batched(images, offsets, cands, scale, options.box_radius, device)
     cost = _kept_array("cost", (len(cands), *images.shape[1:]))

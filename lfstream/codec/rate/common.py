@@ -10,10 +10,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_header, pack_packet
+from lfstream.codec.centre import CentreCoding
+from lfstream.codec.centre.jpeg import QUALITY_RANGE
 from lfstream.codec.encoder import preset_coding
 from lfstream.codec.hint import HintOptions
-from lfstream.codec.intra import CentreCoding
-from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.errors import LFValueError
 
 #: How far from the target a chosen configuration may land (relative), when it can.
@@ -142,11 +142,11 @@ def follow_rate(quality: int, target_bpp: float, spent_bits: float, done_pixels:
 def _first_frame_mpsnr(frames: np.ndarray, present: np.ndarray | None, header: StreamHeader,
                        packets: list[Packet]) -> float:
     """MPSNR (dB, at most 100) of a candidate stream's first frame (a key frame) as decoded."""
-    from lfstream.codec.decoder import decode
+    from lfstream.codec.decoder import Decoder
     from lfstream.metrics import mpsnr
 
-    first = pack_header(header) + pack_packet(packets[0], header.version)
-    return float(np.minimum(mpsnr(frames[0], decode(first)[0], present=present), 100.0))
+    decoded = Decoder(header).decode_packet(packets[0]).lf
+    return float(np.minimum(mpsnr(frames[0], decoded, present=present), 100.0))
 
 
 def validate_target(target_bpp: float, search: str | None = None, preset: str | None = None) -> None:

@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from lfstream.codec.bitstream import Packet
+from lfstream.codec.centre.av1 import av1_fits
 from lfstream.codec.encoder import Encoder
 from lfstream.codec.gains import measure_gains
 from lfstream.codec.hint import HintOptions, key_payload
-from lfstream.codec.intra import av1_fits
 from lfstream.errors import LFValueError
 from lfstream.lightfield import to_uint8
 
@@ -94,7 +94,7 @@ class DefaultChoice:
 def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, present: np.ndarray | None = None,
                     ring_luma: np.ndarray | None = None, grid_scale: int | None = None) -> float:
     """How well the centre view and a hint predict the outer ring of views: the mean PSNR
-    (dB) of the decoder's warp (:func:`lfstream.codec.warp.warp_views_at`) against those
+    (dB) of the decoder's warp (:func:`lfstream.codec.warp.cpu.warp_views_at`) against those
     views, on luma block means at the hint's resolution (where sensor and coding noise are
     small, so a noisy capture is not mistaken for an unpredictable one). About 2 ms for a
     7x7x375x540 frame.
@@ -113,7 +113,7 @@ def prediction_psnr(lf: np.ndarray, hint, gains: np.ndarray | None = None, prese
             resolutions are judged on the same pixels.
     """
     from lfstream.codec.hint import _grids, _ring_views, _upsample
-    from lfstream.codec.warp import warp_views_at
+    from lfstream.codec.warp.cpu import warp_views_at
     from lfstream.metrics import psnr
 
     u, v = lf.shape[:2]

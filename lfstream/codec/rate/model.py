@@ -41,10 +41,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader, pack_header
+from lfstream.codec.centre import encode_centre
+from lfstream.codec.centre.av1 import av1_fits
+from lfstream.codec.centre.jpeg import QUALITY_RANGE
 from lfstream.codec.encoder import Encoder, preset_coding
 from lfstream.codec.hint import HintOptions
-from lfstream.codec.intra import av1_fits, encode_centre
-from lfstream.codec.jpeg import QUALITY_RANGE
 from lfstream.codec.rate.common import (
     FOLLOW_MAX_STEP,
     FOLLOW_STEP_GROWTH,
@@ -237,7 +238,7 @@ def sequence_trial(frame: np.ndarray, prediction: np.ndarray | None, quality: in
     Shape:
         - frame, prediction: ``(U, V, H, W, 3)`` uint8
     """
-    from lfstream.codec.intra import decode_av1
+    from lfstream.codec.centre.av1 import decode_av1
 
     crop = _crop(frame)
     scale = (frame.shape[2] * frame.shape[3]) / (crop.shape[2] * crop.shape[3])

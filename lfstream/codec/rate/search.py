@@ -32,10 +32,11 @@ from dataclasses import replace
 import numpy as np
 
 from lfstream.codec.bitstream import Packet, StreamHeader
+from lfstream.codec.centre import CentreCoding, encode_centre
+from lfstream.codec.centre.av1 import AV1_MIN_VIEW, av1_fits
+from lfstream.codec.centre.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.encoder import PRESETS, RESIDUAL_SPEED, Encoder, residual_meta
 from lfstream.codec.hint import HintOptions
-from lfstream.codec.intra import AV1_MIN_VIEW, CentreCoding, av1_fits, encode_centre
-from lfstream.codec.jpeg import QUALITY_RANGE, PostFilterChooser
 from lfstream.codec.rate.common import (
     RATE_TOLERANCE,
     SEARCHED,

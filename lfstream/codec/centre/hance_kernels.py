@@ -1,5 +1,5 @@
 """JPEG-Hance strength maps' kernel, compiled by numba: the per-tile error terms the encoder
-chooses each strength from (:mod:`lfstream.codec.hance` calls it)."""
+chooses each strength from (:mod:`lfstream.codec.centre.hance` calls it)."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@ any torch device: every candidate plane and every view in one pass, no per-plane
 Python loop. The CPU reference stays the fused numba kernels
 (:func:`lfstream.codec.hint.kernels.sweep_cost`, :func:`~lfstream.codec.hint.kernels.winner_subpixel`)
 and OpenCV's box filter; this is the same arithmetic written for a GPU, checked against them
-on the CPU (tests/codec/test_sweep_batched.py).
+on the CPU (tests/codec/hint/test_sweep_batched.py).
 
 The same steps and numbers as the kernels: each view translated by the candidate's shift
 times its offset (bilinear, border replicated: a candidate moves the whole view by one

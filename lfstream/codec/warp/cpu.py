@@ -62,7 +62,7 @@ def splat_views(disparity: np.ndarray, offsets: np.ndarray, tolerance: float = S
     Shape:
         - output: ``(U, V)`` bool
     """
-    from lfstream.codec.splat_kernels import fold_bounds
+    from lfstream.codec.warp.splat_kernels import fold_bounds
 
     mx, my = fold_bounds(read_only(np.ascontiguousarray(disparity, np.float32)))
     return _splat_mask(float(mx), float(my), offsets, tolerance)
@@ -77,7 +77,7 @@ def splat_rows(disparity: np.ndarray, offsets: np.ndarray, tolerance: float = SP
     centre pixels from rows ``y - r ... y + r`` at most, ``r = ceil(|du| max|d| + 0.5) + 1``
     (:func:`splat_reach`), and a pixel's splatted and unsplatted samples lie on a path
     within those rows; so ``M_x`` and ``M_y`` of the module docstring, taken as maxima over
-    those rows only (:func:`lfstream.codec.splat_kernels.row_fold_bounds`), bound the difference
+    those rows only (:func:`lfstream.codec.warp.splat_kernels.row_fold_bounds`), bound the difference
     there. A row is splatted where ``|δ| (|δ_u| M_y + |δ_v| M_x) > tolerance``: every row of
     a view :func:`splat_views` names at most (the maxima over all rows are the larger).
 
@@ -126,7 +126,7 @@ def _window_max(a: np.ndarray, r: int) -> np.ndarray:
 
 def _splat_plan(d: np.ndarray, offsets: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
     """:func:`splat_rows` and :func:`splat_reach` of one centre map (float32, contiguous)."""
-    from lfstream.codec.splat_kernels import row_fold_bounds
+    from lfstream.codec.warp.splat_kernels import row_fold_bounds
 
     h = d.shape[0]
     rx, ry = np.empty(h, np.float32), np.empty(h, np.float32)
@@ -384,13 +384,13 @@ BESIDE_CHUNK_VIEWS = 4
 def _warp_kernel(src: np.ndarray, d: np.ndarray, view_disp: np.ndarray | None, offsets: np.ndarray,
                  splat: np.ndarray, reach: np.ndarray, gains: np.ndarray | None,
                  beside: Future | None = None, out: np.ndarray | None = None) -> np.ndarray:
-    """Runs the fused warp (:func:`lfstream.codec.warp_kernels.warp_all_views`) over every
+    """Runs the fused warp (:func:`lfstream.codec.warp.kernels.warp_all_views`) over every
     channel triple of ``src`` (H, W, C) uint8; ``splat``: (U, V, H) bool, the view rows
     splatted (:func:`splat_rows`), ``reach``: (U, V) int64 (:func:`splat_reach`);
     ``beside`` and ``out`` (checked by the caller): :func:`warp_views`'s."""
     import numba
 
-    from lfstream.codec.warp_kernels import _LANES, pack_lanes, warp_all_views
+    from lfstream.codec.warp.kernels import _LANES, pack_lanes, warp_all_views
 
     h, w, c = src.shape
     u, v = offsets.shape[:2]
@@ -477,7 +477,7 @@ def view_disparities(disparity: np.ndarray, views: tuple[int, int], occlusion: b
         if corr.shape != (3, *d.shape):
             raise LFShapeError(f"corrections: expected (3, {d.shape[0]}, {d.shape[1]}), got {tuple(corr.shape)}")
         check_finite(corr, "corrections")
-    from lfstream.codec.splat_kernels import splat_all_views
+    from lfstream.codec.warp.splat_kernels import splat_all_views
 
     _check_out(out, (u, v, *d.shape), np.float32)
     if out is None:

@@ -1,7 +1,7 @@
 """The batched warp on a CUDA device as Triton kernels: the splatting rows marked as holes,
 the z-tested forward splat into them, their row-wise hole filling, and the per-pixel warp.
 
-:func:`lfstream.codec.warp_batched.warp_views_batched` written as torch operations moves
+:func:`lfstream.codec.warp.batched.warp_views_batched` written as torch operations moves
 every intermediate (tap positions, int64 indices, four gathered taps per channel, float64
 gain blends, the splat's scatter and the hole filling's scans) through GPU memory: 130 LF/s
 of 7x7x375x540 on an H100. With this module: 1,397 LF/s (30 a
@@ -17,10 +17,10 @@ The per-pixel kernel does a view pixel's whole chain in registers: the view's di
 1/1024-pixel fixed point, the four taps of the replicate-padded centre view, the
 fixed-point bilinear blend, the shading gain up-sampled from its grid with OpenCV's
 INTER_LINEAR taps, and the uint8 store. Same arithmetic as the CPU kernel
-(:func:`lfstream.codec.warp_kernels.warp_all_views`) and the torch path; floating-point
+(:func:`lfstream.codec.warp.kernels.warp_all_views`) and the torch path; floating-point
 contraction is off, so each operation rounds where the torch path rounds (fused
 multiply-adds only where the kernel has them). Checked on the H100 against the torch path
-and the CPU kernel (tests/codec/test_warp_batched.py: within a level, as the tests bound
+and the CPU kernel (tests/codec/warp/test_warp_batched.py: within a level, as the tests bound
 the torch path), and in Triton's interpreter against the torch path to the byte.
 
 Triton ships with CUDA builds of torch; without it, or off CUDA, the torch path runs.
@@ -195,7 +195,7 @@ def splat_maps(d: torch.Tensor, offsets: torch.Tensor, splat_rows: torch.Tensor,
                view0: int, n: int) -> torch.Tensor:
     """Views ``view0 ... view0 + n - 1``'s disparity maps in the rows ``splat_rows`` names: the
     centre maps ``d`` forward-splatted (z-tested) and hole-filled
-    (:func:`lfstream.codec.warp_batched._splat` and ``_fill_holes``, in three kernels); the
+    (:func:`lfstream.codec.warp.batched._splat` and ``_fill_holes``, in three kernels); the
     other rows are left unwritten (:func:`warp_pixels` reads ``d`` there).
 
     Args:

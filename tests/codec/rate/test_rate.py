@@ -57,7 +57,7 @@ def test_cli_encode_and_stream_take_bpp(scene, tmp_path, capsys):
 def test_quality_search_finds_the_bisection_bracket_in_fewer_probes():
     """The interpolating search returns exactly plain bisection's bracket for any growing
     size curve (plateaus included, targets beyond either end) and probes less."""
-    from lfstream.codec.jpeg import QUALITY_RANGE
+    from lfstream.codec.centre.jpeg import QUALITY_RANGE
     from lfstream.codec.rate.search import _quality_bracket
 
     def plain(size, target):
@@ -88,7 +88,7 @@ def test_quality_search_finds_the_bisection_bracket_in_fewer_probes():
 
 
 def test_follow_rate_moves_the_quality_toward_the_budget():
-    from lfstream.codec.jpeg import QUALITY_RANGE
+    from lfstream.codec.centre.jpeg import QUALITY_RANGE
     from lfstream.codec.rate import FOLLOW_DEADBAND, FOLLOW_MAX_STEP, follow_rate
 
     px = 1000

@@ -7,9 +7,9 @@ import numba
 import numpy as np
 import pytest
 
-from lfstream.codec import warp as warp_module
 from lfstream.codec.gains import apply_gains
-from lfstream.codec.warp import (
+from lfstream.codec.warp import cpu as warp_module
+from lfstream.codec.warp.cpu import (
     SPLAT_TOLERANCE_PX,
     VIEW_COST_SPLAT,
     VIEW_COST_TAPS,
@@ -483,7 +483,7 @@ def test_splat_rows_is_the_bound_over_the_rows_within_reach():
 
 
 def test_window_maxima_clip_at_the_ends(rng):
-    from lfstream.codec.warp import _window_max
+    from lfstream.codec.warp.cpu import _window_max
 
     for h in (1, 2, 5, 40):
         a = rng.random(h)

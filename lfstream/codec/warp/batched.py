@@ -1,8 +1,8 @@
-"""The decoder's warp (:func:`lfstream.codec.warp.warp_views`) as batched tensor operations
+"""The decoder's warp (:func:`lfstream.codec.warp.cpu.warp_views`) as batched tensor operations
 on any torch device: several frames at once, every view of a chunk in one pass, no per-view
 or per-pixel Python loop. The CPU reference stays the fused numba kernel
-(:func:`lfstream.codec.warp_kernels.warp_all_views`); this is the same arithmetic written for a
-GPU, checked against it on the CPU (tests/codec/test_warp_batched.py).
+(:func:`lfstream.codec.warp.kernels.warp_all_views`); this is the same arithmetic written for a
+GPU, checked against it on the CPU (tests/codec/warp/test_warp_batched.py).
 
 The same steps and numbers as the kernel: the centre disparity forward-splatted into each
 view (nearest pixel, the larger disparity wins), holes given their nearest splatted
@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lfstream.codec import warp as _warp
-from lfstream.codec.warp import _check_views, _linear_taps
+from lfstream.codec.warp import cpu as _warp
+from lfstream.codec.warp.cpu import _check_views, _linear_taps
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import view_offsets
 
@@ -38,7 +38,7 @@ DEFAULT_CHUNK_PIXELS = 1 << 25
 
 
 def _floor_int(t: torch.Tensor, offset: float) -> torch.Tensor:
-    """floor(t) as the kernel computes it (:func:`lfstream.codec.warp_kernels._floor_int`): the
+    """floor(t) as the kernel computes it (:func:`lfstream.codec.warp.kernels._floor_int`): the
     truncation of ``t + offset`` in float32, clamped the same way."""
     return (t.clamp(1.0 - offset, 1.0e9) + offset).to(torch.int32) - int(offset)  # a float32 sum
 
@@ -74,7 +74,7 @@ def _splat(d: torch.Tensor, du: torch.Tensor, dv: torch.Tensor) -> torch.Tensor:
 
 def _row_fold_bounds(d: torch.Tensor) -> torch.Tensor:
     """Per frame and row ``(rx, ry)`` of the centre maps ``d`` (B, 1, H, W), as
-    :func:`lfstream.codec.splat_kernels.row_fold_bounds` computes them (the same float32
+    :func:`lfstream.codec.warp.splat_kernels.row_fold_bounds` computes them (the same float32
     operations, each rounded once, so the same values; ``ry`` of the last row 0).
 
     Shape:
@@ -93,7 +93,7 @@ def _row_fold_bounds(d: torch.Tensor) -> torch.Tensor:
 
 def _window_max(a: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
     """``out[b, k, y] = max(a[b, y - r : y + r + 1])`` with ``r = reach[b, k]``, the window
-    clipped at the ends (:func:`lfstream.codec.warp._window_max`, every frame and reach at
+    clipped at the ends (:func:`lfstream.codec.warp.cpu._window_max`, every frame and reach at
     once): a sparse table of maxima over runs of 2^j rows, two lookups a window. Maxima are
     exact, so the values are the host's.
 
@@ -124,9 +124,9 @@ def _window_max(a: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
 
 
 def _splat_rows(d: torch.Tensor, offsets: np.ndarray, tolerance: float) -> torch.Tensor:
-    """The view rows each frame splats (:func:`lfstream.codec.warp.splat_rows`) on the maps'
+    """The view rows each frame splats (:func:`lfstream.codec.warp.cpu.splat_rows`) on the maps'
     device, every frame at once: the same float32 fold bounds as the CPU kernel's, the same
-    float64 windows and test (:func:`lfstream.codec.warp._rows_from_bounds`), and no trip to
+    float64 windows and test (:func:`lfstream.codec.warp.cpu._rows_from_bounds`), and no trip to
     the host.
 
     Shape:
@@ -148,7 +148,7 @@ def _fill_holes(maps: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
     """Every hole of the splatted ``maps`` (B, n, H, W) takes its nearest splatted neighbour
     in the row on the background side (the smaller disparity; the left one on a tie), the
     one neighbour a run at the row's end has, or the centre map ``d`` (B, 1, H, W) where the
-    row has none (:func:`lfstream.codec.warp_kernels._fill_holes`)."""
+    row has none (:func:`lfstream.codec.warp.kernels._fill_holes`)."""
     w = maps.shape[-1]
     hole = maps <= _HOLE_TEST
     pos = torch.arange(w, device=maps.device, dtype=torch.int64).expand_as(maps)
@@ -166,7 +166,7 @@ def _fill_holes(maps: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
 def _bilinear(src: torch.Tensor, idx: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor, stride: int) -> torch.Tensor:
     """Bilinear samples of the padded views ``src`` (B, C, (H + 2) * (W + 2)) int32 at the
     top-left taps ``idx`` (B, 1, N) int64 with 1/1024-pixel fractions ``fx, fy`` (B, 1, N...)
-    int32, as the kernel computes them (:func:`lfstream.codec.warp_kernels._sample_at`):
+    int32, as the kernel computes them (:func:`lfstream.codec.warp.kernels._sample_at`):
     each row's pair rounded to 8 x the value, then the rows blended.
 
     Shape:
@@ -199,13 +199,13 @@ def _gain_columns(gains: torch.Tensor, cols: torch.Tensor, col_w: torch.Tensor) 
 
 
 def _fused_warp(device: torch.device):
-    """The fused kernels (:mod:`lfstream.codec.warp_triton`: ``splat_maps`` and
+    """The fused kernels (:mod:`lfstream.codec.warp.triton`: ``splat_maps`` and
     ``warp_pixels``) on a CUDA device where Triton imports (it ships with CUDA builds of
     torch); ``None``: the torch path."""
     if device.type != "cuda":
         return None
     try:
-        from lfstream.codec import warp_triton
+        from lfstream.codec.warp import triton as warp_triton
     except ImportError:
         return None
     return warp_triton
@@ -222,19 +222,19 @@ def warp_views_batched(
     chunk_pixels: int = DEFAULT_CHUNK_PIXELS,
 ) -> torch.Tensor:
     """Every view of several light fields from their centre views and centre disparities,
-    on the tensors' device (:func:`lfstream.codec.warp.warp_views`, batched).
+    on the tensors' device (:func:`lfstream.codec.warp.cpu.warp_views`, batched).
 
     Args:
         centres: ``(B, H, W, C)`` uint8 centre views.
         disparities: ``(B, H, W)`` float32 centre-view disparities, px per view step.
         views: ``(U, V)`` of the output.
         occlusion: per-view disparity by z-tested forward splatting where it can matter
-            (as ``warp_views``: the rows :func:`lfstream.codec.warp.splat_rows` names, per frame).
+            (as ``warp_views``: the rows :func:`lfstream.codec.warp.cpu.splat_rows` names, per frame).
         gains: ``(B, U, V, gh, gw, 1 or C)`` float32 gain maps, or ``None``; a frame whose
             maps are all within 1e-6 of 1 is warped without gains, as ``warp_views`` does.
         axes: ``(2, 2)`` view axes shared by the frames; ``None``: the convention.
         view_disparities: ``(B, U, V, H, W)`` float32 per-view maps (Depth-Net's) used in place
-            of the splatted ones (as :func:`lfstream.codec.warp.warp_views_per_view`).
+            of the splatted ones (as :func:`lfstream.codec.warp.cpu.warp_views_per_view`).
         chunk_pixels: view pixels (frames x views x pixels) per pass, to bound memory (the
             fused CUDA kernels hold a sixteenth as much per pixel: 16 x as many a pass, and
             one pass where nothing splats).

@@ -16,8 +16,9 @@ from lfstream.codec.bitstream import (
     read_header,
     split_stream,
 )
+from lfstream.codec.centre import CentreCoding
+from lfstream.codec.centre.av1 import av1_crf, decode_av1, encode_av1
 from lfstream.codec.encoder import PRESETS
-from lfstream.codec.intra import CentreCoding, av1_crf, decode_av1, encode_av1
 from lfstream.errors import BitstreamError, LFValueError
 from lfstream.metrics import mpsnr, psnr
 from lfstream.synth import synth_clip
@@ -42,7 +43,7 @@ def test_av1_round_trip_is_faithful_deterministic_and_crops_odd_sizes(scene):
 def test_av1_centre_decodes_the_same_on_one_thread_or_several(scene, monkeypatch):
     """Small centre views are decoded on one dav1d thread (AV1_THREADED_MIN_PIXELS), large
     ones threaded: the same pixels either way."""
-    from lfstream.codec import intra
+    from lfstream.codec.centre import av1 as intra
 
     img = np.ascontiguousarray(scene[2, 2])
     data = encode_av1(img, 60)
@@ -54,8 +55,8 @@ def test_av1_centre_decodes_the_same_on_one_thread_or_several(scene, monkeypatch
 def test_colour_conversion_keeps_chroma_detail():
     """4:2:0 by 2x2 means and bilinear up-sampling: within 1 dB of JPEG q100's own 4:2:0
     round trip on a textured synthetic view (OpenCV's I420 conversion lost ~5 dB there)."""
-    from lfstream.codec.intra import i420_to_rgb, rgb_to_i420
-    from lfstream.codec.jpeg import jpeg_roundtrip
+    from lfstream.codec.centre.av1 import i420_to_rgb, rgb_to_i420
+    from lfstream.codec.centre.jpeg import jpeg_roundtrip
 
     img = synth_clip(1, 3, (96, 128), seed=21, noise=2.0).lf[0, 1, 1]
     back = i420_to_rgb(rgb_to_i420(img))
@@ -81,7 +82,7 @@ def test_svt_av1_is_capped_at_avx2_on_x86_and_left_alone_elsewhere(monkeypatch):
     import platform
 
     from lfstream.codec.baseline import CODECS
-    from lfstream.codec.intra import svt_options
+    from lfstream.codec.centre.av1 import svt_options
 
     monkeypatch.setattr(platform, "machine", lambda: "x86_64")
     assert svt_options() == {"svtav1-params": "asm=avx2"}
@@ -188,7 +189,7 @@ def test_views_too_small_for_av1_are_a_clear_error_and_the_default_still_codes_t
 
 
 def test_the_av1_limit_holds_at_the_encoder_door_and_at_a_half_views_residual_size():
-    from lfstream.codec.intra import av1_fits, svtav1_encoder
+    from lfstream.codec.centre.av1 import av1_fits, svtav1_encoder
     from lfstream.errors import LFValueError
 
     assert av1_fits((31, 31)) and av1_fits((32, 400)) and not av1_fits((30, 400)) and not av1_fits((400, 29))

@@ -9,8 +9,8 @@ held-out seahorse: -0.07 dB on the decoded LF at q50) while half of it gained (+
 decodes its own packet, runs the network, and keeps, per tile, the strength level whose
 warp has the smallest squared error over every view (measured from the warps of the plain
 and the restored centre: :func:`measure_hance_map`). The map travels in the
-JPEG (:func:`lfstream.codec.jpeg.with_hance_map`, 16 x 16 tiles: 96 bytes a frame) and the
-decoder blends the correction by it, bilinearly (:func:`lfstream.codec.jpeg.hance_strength`).
+JPEG (:func:`lfstream.codec.centre.jpeg.with_hance_map`, 16 x 16 tiles: 96 bytes a frame) and the
+decoder blends the correction by it, bilinearly (:func:`lfstream.codec.centre.jpeg.hance_strength`).
 Measured with the fast preset's encode at q50, on the three scenes the network was not
 trained on, the decoded LF with the map against the post-filter alone: seahorse +0.260 dB,
 cotton +0.295, lytro_translucent +0.114 with the shipped network (four blocks at 0.617 of
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lfstream.codec.jpeg import HANCE_LEVELS, MAX_HANCE_TILES
+from lfstream.codec.centre.jpeg import HANCE_LEVELS, MAX_HANCE_TILES
 from lfstream.errors import LFValueError
 
 #: The JPEG-Hance preset the encoder measures its maps for; a decoder running another preset
@@ -55,12 +55,12 @@ def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarra
     the tile's pixels; ties go to the lower level.
 
     The decoder warps the centre blended at the level
-    (:func:`lfstream.codec.jpeg.blend_restored`, then :func:`lfstream.codec.warp.warp_views`),
+    (:func:`lfstream.codec.centre.jpeg.blend_restored`, then :func:`lfstream.codec.warp.cpu.warp_views`),
     and the warp is linear in the image it warps (the splat's order and the holes follow the
     disparity alone), so the warp at strength ``s`` is ``P + s * (R - P)``, with ``P`` and
     ``R`` the warps of ``centre`` and ``restored``, up to the rounding of each to 8 bits. The
     error is then a quadratic in ``s`` per tile, measured from two warps in one pass
-    (:func:`lfstream.codec.hance_kernels.strength_error_terms`) rather than a blend, a warp and an
+    (:func:`lfstream.codec.centre.hance_kernels.strength_error_terms`) rather than a blend, a warp and an
     error pass per level: a fraction of the work, the same decoded light fields within
     0.001 dB (the rounding moves a level only where two are within it).
 
@@ -70,7 +70,7 @@ def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarra
         restored: the network's output for it, uint8.
         disparity: the decoder's centre-view disparity; axes, gains: the decoder's.
         present: ``(U, V)`` views that exist; ``None``: all.
-        tiles: tiles a side (at most :data:`lfstream.codec.jpeg.MAX_HANCE_TILES`).
+        tiles: tiles a side (at most :data:`lfstream.codec.centre.jpeg.MAX_HANCE_TILES`).
         warped: ``centre``'s warp as above where the caller has it (the encoder's reference
             decode: the decoder's light field), one warp saved.
 
@@ -78,8 +78,8 @@ def measure_hance_map(views: np.ndarray, centre: np.ndarray, restored: np.ndarra
         - views: ``(U, V, H, W, 3)``; centre, restored: ``(H, W, 3)``; disparity: ``(H, W)``
         - output: ``(min(tiles, H), min(tiles, W))`` uint8
     """
-    from lfstream.codec.hance_kernels import strength_error_terms
-    from lfstream.codec.warp import warp_views
+    from lfstream.codec.centre.hance_kernels import strength_error_terms
+    from lfstream.codec.warp.cpu import warp_views
 
     if not 1 <= tiles <= MAX_HANCE_TILES:
         raise LFValueError(f"tiles: 1..{MAX_HANCE_TILES}, got {tiles!r}")

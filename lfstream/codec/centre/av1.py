@@ -1,5 +1,5 @@
-"""The centre view's still-image coding: JPEG (the seed's choice, the ``fast`` preset) or an
-AV1 intra frame (SVT-AV1 encoder, dav1d decoder, both inside PyAV).
+"""The centre view as an AV1 intra frame (SVT-AV1 encoder, dav1d decoder, both inside PyAV):
+the ``balanced`` and ``best`` presets (JPEG, the ``fast`` preset: :mod:`lfstream.codec.centre.jpeg`).
 
 On the shared samples' centre views (``bench/rd.py`` has the light-field curves) an AV1 key
 frame takes a third fewer bytes than JPEG at equal PSNR on the noisy Lytro capture and about
@@ -9,7 +9,7 @@ whole rate-distortion curve to fewer bits.
 
 Both coders take one ``quality`` in 1..100 (higher: better, more bits); for AV1 it maps
 linearly onto SVT-AV1's CRF 63..1. Both are deterministic: the same image and quality give
-the same bytes (SVT-AV1 at a fixed preset, checked by tests/codec/test_intra.py).
+the same bytes (SVT-AV1 at a fixed preset, checked by tests/codec/centre/test_av1.py).
 """
 
 from __future__ import annotations
@@ -17,51 +17,17 @@ from __future__ import annotations
 import errno
 import os
 import platform
-from dataclasses import dataclass
 from fractions import Fraction
 
 import cv2
 import numpy as np
 
-from lfstream.codec.bitstream import CODEC_AV1, CODEC_JPEG, CODEC_NAMES
+from lfstream.codec.centre.jpeg import QUALITY_RANGE
 from lfstream.codec.deadline import call_with_deadline, encoder_deadline
-from lfstream.codec.jpeg import QUALITY_RANGE, decode_jpeg, encode_jpeg
 from lfstream.errors import BitstreamError, LFValueError
 
-CODEC_IDS = {name: cid for cid, name in CODEC_NAMES.items()}
 #: SVT-AV1 speed presets lfstream uses (13 fastest): see :data:`lfstream.codec.encoder.PRESETS`.
 AV1_SPEED_RANGE = (4, 13)
-
-
-@dataclass(frozen=True)
-class CentreCoding:
-    """How the centre view is coded.
-
-    Attributes:
-        codec: ``"jpeg"`` or ``"av1"``.
-        speed: SVT-AV1 preset (``AV1_SPEED_RANGE``; higher is faster, fewer bits saved);
-            ignored for JPEG.
-    """
-
-    codec: str = "jpeg"
-    speed: int = 12
-
-    def __post_init__(self) -> None:
-        if self.codec not in CODEC_IDS:
-            raise LFValueError(f"centre codec: one of {', '.join(CODEC_IDS)}, got {self.codec!r}")
-        lo, hi = AV1_SPEED_RANGE
-        if not isinstance(self.speed, (int, np.integer)) or not lo <= self.speed <= hi:
-            raise LFValueError(f"AV1 speed preset: an integer in {lo}..{hi}, got {self.speed!r}")
-
-    @property
-    def codec_id(self) -> int:
-        return CODEC_IDS[self.codec]
-
-    def as_meta(self, quality: int) -> dict:
-        """What the stream header records (the decoder needs only the codec id)."""
-        if self.codec == "jpeg":
-            return {"codec": "jpeg", "quality": int(quality)}
-        return {"codec": "av1", "quality": int(quality), "crf": svt_crf(quality, self.speed), "svt_preset": int(self.speed)}
 
 
 def av1_crf(quality: int) -> int:
@@ -255,24 +221,8 @@ def decode_av1(data: bytes, size: tuple[int, int], frame: int | None = None) -> 
     return i420_to_rgb(frames[0].to_ndarray(format="yuv420p"))[:h, :w]
 
 
-def encode_centre(img: np.ndarray, quality: int, coding: CentreCoding) -> bytes:
-    """The centre view's payload in the chosen coding."""
-    if coding.codec == "jpeg":
-        return encode_jpeg(img, quality)
-    return encode_av1(img, quality, coding.speed)
-
-
-def decode_centre(data: bytes, codec_id: int, size: tuple[int, int], frame: int | None = None) -> np.ndarray:
-    """A centre-view payload to uint8 RGB ``(H, W, 3)`` by the header's codec id."""
-    if codec_id == CODEC_JPEG:
-        return decode_jpeg(data, size, frame)
-    if codec_id == CODEC_AV1:
-        return decode_av1(data, size, frame)
-    raise BitstreamError(f"unknown centre-view codec id {codec_id}", frame)
-
-
-__all__ = ["CODEC_IDS", "AV1_SPEED_RANGE", "AV1_MIN_SIZE", "AV1_MIN_VIEW", "av1_fits",
-           "CentreCoding", "av1_crf", "svt_crf", "SVT_CRF_FLOOR_FROM", "SVT_FAST_MIN_CRF",
+__all__ = ["AV1_SPEED_RANGE", "AV1_MIN_SIZE", "AV1_MIN_VIEW", "av1_fits",
+           "av1_crf", "svt_crf", "SVT_CRF_FLOOR_FROM", "SVT_FAST_MIN_CRF",
            "rgb_to_i420", "i420_to_rgb", "pad_to_even",
            "svtav1_encoder", "quiet_svt_log", "svt_options", "SVT_X86_ASM",
-           "AV1_THREADED_MIN_PIXELS", "encode_av1", "decode_av1", "max_av1_pixels", "encode_centre", "decode_centre"]
+           "AV1_THREADED_MIN_PIXELS", "encode_av1", "decode_av1", "max_av1_pixels"]

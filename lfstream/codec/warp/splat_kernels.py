@@ -1,6 +1,6 @@
 """The per-view disparity maps outside the warp, compiled by numba: every view's map
 forward-splatted with Depth-Net's corrections, and the bounds of where a map folds over
-(:mod:`lfstream.codec.warp` calls them)."""
+(:mod:`lfstream.codec.warp.cpu` calls them)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numba
 import numpy as np
 
 from lfstream.codec._numba import _EXACT_BORROWED, _PARALLEL, _ROW
-from lfstream.codec.warp_kernels import _fill_holes, _hole_scratch, _splat_view
+from lfstream.codec.warp.kernels import _fill_holes, _hole_scratch, _splat_view
 
 
 @numba.njit(**_EXACT_BORROWED)
@@ -95,7 +95,7 @@ def row_fold_bounds(disp, rx, ry):  # pragma: no cover - compiled
 def fold_bounds(disp):  # pragma: no cover - compiled
     """``(max |d(y, x+1) - d(y, x)| * max(|d(y, x)|, |d(y, x+1)|), the same along y)``: how
     far the disparity changes between neighbours, weighted by how far it moves them
-    (:func:`lfstream.codec.warp.splat_views`). One pass; float32 products, each rounded once,
+    (:func:`lfstream.codec.warp.cpu.splat_views`). One pass; float32 products, each rounded once,
     as the batched torch path computes them.
 
     Args:

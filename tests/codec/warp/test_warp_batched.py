@@ -8,10 +8,11 @@ import pytest
 import torch
 
 import lfstream
-from lfstream.codec.decoder import Decoder, iter_decode
-from lfstream.codec.splat_kernels import fold_bounds, row_fold_bounds
-from lfstream.codec.warp import splat_rows, splat_views, view_disparities, warp_views, warp_views_per_view
-from lfstream.codec.warp_batched import _row_fold_bounds, _splat_rows, _window_max, warp_views_batched
+from lfstream.codec.api import iter_decode
+from lfstream.codec.decoder import Decoder
+from lfstream.codec.warp.batched import _row_fold_bounds, _splat_rows, _window_max, warp_views_batched
+from lfstream.codec.warp.cpu import splat_rows, splat_views, view_disparities, warp_views, warp_views_per_view
+from lfstream.codec.warp.splat_kernels import fold_bounds, row_fold_bounds
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.lightfield import view_offsets
 from lfstream.synth import synth_clip
@@ -200,7 +201,7 @@ def test_cuda_agrees_with_the_cpu(rng):
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 @pytest.mark.parametrize("case", ["plain", "gains", "gain_per_channel", "per_view", "chunked"])
 def test_the_fused_cuda_kernel_agrees_with_the_tensor_path(case, rng, monkeypatch):
-    """The one-kernel warp (Triton, lfstream/codec/warp_triton.py) against the tensor path on
+    """The one-kernel warp (Triton, lfstream/codec/warp/triton.py) against the tensor path on
     the same CUDA device and against the CPU kernel: frames that splat and frames that do not,
     per-frame gains, Depth-Net's per-view maps, several passes."""
     pytest.importorskip("triton")
@@ -257,7 +258,7 @@ print("same bytes")
 
 
 def test_the_triton_kernels_in_the_interpreter_give_the_tensor_paths_bytes():
-    """The CUDA kernels (lfstream/codec/warp_triton.py) run by Triton's interpreter on the CPU,
+    """The CUDA kernels (lfstream/codec/warp/triton.py) run by Triton's interpreter on the CPU,
     where Triton is installed (CUDA builds of torch bring it): frames that splat some rows and
     not others, gains, several passes; the bytes of the tensor path."""
     pytest.importorskip("triton")

@@ -1,7 +1,7 @@
 """The decoder's warp, compiled by numba (cached on disk): forward splatting of the centre
 view's disparity with a z-test, hole filling, fixed-point bilinear sampling and the shading
 gains of a view in one pass, one view per thread, nothing per view materialised beyond the
-splatted map (:mod:`lfstream.codec.warp` calls them). The per-view disparity of an
+splatted map (:mod:`lfstream.codec.warp.cpu` calls them). The per-view disparity of an
 occlusion-aware warp needs per-pixel control flow that array operations cannot express."""
 
 from __future__ import annotations
@@ -120,7 +120,7 @@ def _splat_view(disp, cols, du, dv, dview, targets, rows, reach, counts):  # pra
 
     Only the view rows ``rows`` (H,) bool are wanted: a centre row is splatted where one of
     them lies within ``reach`` rows of it (no centre pixel lands further from its own row,
-    :func:`lfstream.codec.warp.splat_rows`), so those rows are exactly what splatting every
+    :func:`lfstream.codec.warp.cpu.splat_rows`), so those rows are exactly what splatting every
     row gives; the others may hold partial results. ``counts`` (H + 1,) int32 scratch.
     """
     h, w = disp.shape
@@ -424,7 +424,7 @@ def warp_all_views(packed, channels, ch0, n_ch, disp, view_disp, offsets, splat,
             place of splatting ``disp``; shape (0, 0, 1, 1): none.
         offsets: (U, V, 2) float32 displacement of each view per unit disparity.
         splat: (U, V, H) bool, the view rows whose disparity is splatted (never the centre
-            view's; :func:`lfstream.codec.warp.splat_rows`).
+            view's; :func:`lfstream.codec.warp.cpu.splat_rows`).
         reach: (U, V) int64, how many rows from its own a centre pixel can land in each view.
         gains: (U, V, gh, gw, Cg) float32 gain maps (Cg = 1 or C), or shape (0, 0, 1, 1, 1): none.
         g_rows, g_row_w: (H, 2) int64 grid rows per image row and the weight of the first.

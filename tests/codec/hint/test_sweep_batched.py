@@ -14,7 +14,7 @@ from lfstream.cli import main
 from lfstream.codec.encoder import Encoder
 from lfstream.codec.hint import HintOptions, estimate_hint_map
 from lfstream.codec.hint.kernels import sweep_cost, winner_subpixel
-from lfstream.codec.sweep_batched import box_mean, sweep_batched, sweep_cost_batched, winner_subpixel_batched
+from lfstream.codec.hint.sweep_batched import box_mean, sweep_batched, sweep_cost_batched, winner_subpixel_batched
 from lfstream.errors import LFShapeError, LFValueError
 from lfstream.metrics import mpsnr
 from lfstream.synth import synth_clip

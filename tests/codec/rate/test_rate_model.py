@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import lfstream
-from lfstream.codec.jpeg import QUALITY_RANGE
+from lfstream.codec.centre.jpeg import QUALITY_RANGE
 from lfstream.codec.rate import SEARCHES
 from lfstream.codec.rate import model as rate_model
 from lfstream.codec.rate.model import (

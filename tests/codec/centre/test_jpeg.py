@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from lfstream.codec.jpeg import deblock_jpeg, decode_jpeg, encode_jpeg, jpeg_quality_scale, post_filter_jpeg
+from lfstream.codec.centre.jpeg import deblock_jpeg, decode_jpeg, encode_jpeg, jpeg_quality_scale, post_filter_jpeg
 from lfstream.synth import synth_clip
 
 
@@ -85,7 +85,7 @@ def test_roundtrip_with_deblock_is_the_decoders_filtered_view():
     """``jpeg_roundtrip(..., deblock=True)`` (a post-filter network's training input) is the
     decoded JPEG through the filter the encoder chooses for it, at that JPEG's own strength,
     as the decoder shows it."""
-    from lfstream.codec.jpeg import POST_FILTERS, choose_post_filter, jpeg_roundtrip
+    from lfstream.codec.centre.jpeg import POST_FILTERS, choose_post_filter, jpeg_roundtrip
 
     img = synth_clip(1, 1, (64, 96), seed=12, noise=2.0, motion=0).lf[0, 0, 0]
     data = encode_jpeg(img, 40)
@@ -101,7 +101,7 @@ def test_roundtrip_with_deblock_is_the_decoders_filtered_view():
 def test_a_post_filter_segment_names_the_filter_and_keeps_the_pixels():
     """The encoder's choice rides in a JPEG comment right after SOI: the pixels, and any
     JPEG decoder, are unaffected; the default choice is the plain JPEG, byte for byte."""
-    from lfstream.codec.jpeg import POST_FILTERS, PostFilterChoice, named_post_filter, with_post_filter
+    from lfstream.codec.centre.jpeg import POST_FILTERS, PostFilterChoice, named_post_filter, with_post_filter
     from lfstream.errors import BitstreamError, LFValueError
 
     img = synth_clip(1, 1, (48, 64), seed=2, noise=2.0, motion=0).lf[0, 0, 0]
@@ -131,7 +131,7 @@ def test_a_stream_naming_an_unknown_post_filter_fails_naming_the_frame(tmp_path)
     import lfstream
     from lfstream.cli import main
     from lfstream.codec.bitstream import pack_header, pack_packet, split_stream
-    from lfstream.codec.jpeg import PostFilterChoice, with_post_filter
+    from lfstream.codec.centre.jpeg import PostFilterChoice, with_post_filter
     from lfstream.errors import BitstreamError
 
     lf = synth_clip(2, 3, (48, 64), seed=6).lf
@@ -147,7 +147,7 @@ def test_a_stream_naming_an_unknown_post_filter_fails_naming_the_frame(tmp_path)
 
 def _brute_force_choice(img: np.ndarray, data: bytes) -> int:
     """The filter rule of :func:`choose_post_filter` measured on the whole view."""
-    from lfstream.codec.jpeg import CHOICE_MAX_PSNR_LOSS, CHOICE_MIN_SSIM_GAIN, POST_FILTERS
+    from lfstream.codec.centre.jpeg import CHOICE_MAX_PSNR_LOSS, CHOICE_MIN_SSIM_GAIN, POST_FILTERS
     from lfstream.metrics import psnr, ssim
 
     raw = decode_jpeg(data, img.shape[:2])
@@ -163,7 +163,7 @@ def test_the_choice_on_the_sample_is_the_whole_views_choice(seed, noise, quality
     """Measured on six bands of rows (each filtered with its context, so exactly what the
     whole view shows there), the choice agrees with the same rule on the whole view; and
     a chosen filter is at least as good as the default in SSIM on the whole view."""
-    from lfstream.codec.jpeg import POST_FILTERS, choose_post_filter
+    from lfstream.codec.centre.jpeg import POST_FILTERS, choose_post_filter
     from lfstream.metrics import ssim
 
     img = np.ascontiguousarray(synth_clip(1, 3, (192, 256), seed=seed, noise=noise, vignetting=0.3, motion=0,
@@ -184,7 +184,7 @@ def test_black_that_jpeg_lifts_is_named_and_restored(quality, floor):
     not divide 1024 (40, 70) the black decodes at 1 and SSIM collapses in it; the encoder
     names floor 1 and the decoder's view is black again (SSIM up by more than 0.05); at 50
     it decodes at 0 and nothing is named."""
-    from lfstream.codec.jpeg import choose_post_filter, with_post_filter
+    from lfstream.codec.centre.jpeg import choose_post_filter, with_post_filter
     from lfstream.metrics import ssim
 
     img = np.zeros((128, 160, 3), np.uint8)
@@ -210,8 +210,8 @@ def test_the_encoder_names_a_better_filter_for_a_noisy_view_and_can_be_told_not_
 
     import lfstream
     from lfstream.codec.bitstream import StreamWriter, split_stream
+    from lfstream.codec.centre.jpeg import named_post_filter
     from lfstream.codec.encoder import Encoder
-    from lfstream.codec.jpeg import named_post_filter
     from lfstream.metrics import mssim
 
     lf = synth_clip(1, 5, (192, 256), seed=21, noise=2.0, vignetting=0.3, motion=0, camera_pan=0).lf[0]
@@ -228,7 +228,7 @@ def test_the_encoder_names_a_better_filter_for_a_noisy_view_and_can_be_told_not_
 
 
 def test_the_choice_is_measured_on_key_frames_only(monkeypatch):
-    import lfstream.codec.jpeg as jpeg
+    import lfstream.codec.centre.jpeg as jpeg
 
     calls = []
     monkeypatch.setattr(jpeg, "choose_post_filter",
@@ -243,7 +243,7 @@ def test_the_choice_is_measured_on_key_frames_only(monkeypatch):
 def test_the_jfif_segment_is_left_out_and_no_pixel_changes(rng):
     """encode_jpeg drops libjpeg's optional JFIF APP0 segment (18 bytes): the same pixels as
     the JPEG OpenCV writes with it, and the post-filter's comment still goes right after SOI."""
-    from lfstream.codec.jpeg import POST_FILTERS, PostFilterChoice, named_post_filter, with_post_filter
+    from lfstream.codec.centre.jpeg import POST_FILTERS, PostFilterChoice, named_post_filter, with_post_filter
 
     img = (rng.random((48, 72, 3)) * 255).astype(np.uint8)
     ours = encode_jpeg(img, 50)
@@ -263,7 +263,7 @@ def test_wide_post_filters_run_without_ipp_on_this_thread_only_and_give_the_same
     switch is restored afterwards and never seen by another thread."""
     import threading
 
-    from lfstream.codec.jpeg import IPP_BILATERAL_MAX_DIAMETER, POST_FILTERS
+    from lfstream.codec.centre.jpeg import IPP_BILATERAL_MAX_DIAMETER, POST_FILTERS
 
     rng = np.random.default_rng(3)
     img = cv2.GaussianBlur(rng.integers(0, 256, (75, 101, 3), dtype=np.uint8), (3, 3), 0)
@@ -297,7 +297,7 @@ def test_the_wide_post_filter_in_pieces_of_rows_gives_one_calls_bytes(monkeypatc
     """The 7 x 7 filter runs as pieces of rows sized to OpenCV's thread stripes, each with its
     neighbours' context rows: exactly one call's output, whatever the pieces (a piece a row
     high included)."""
-    from lfstream.codec import jpeg
+    from lfstream.codec.centre import jpeg
 
     rng = np.random.default_rng(7)
     img = cv2.GaussianBlur(rng.integers(0, 256, (*shape, 3), dtype=np.uint8), (3, 3), 0)

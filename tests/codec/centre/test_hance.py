@@ -1,4 +1,4 @@
-"""The JPEG-Hance strength map (lfstream.codec.hance, its JPEG segment in lfstream.codec.jpeg):
+"""The JPEG-Hance strength map (lfstream.codec.centre.hance, its JPEG segment in lfstream.codec.centre.jpeg):
 the segment's coding and damage, the strengths and the blend, the encoder's measurement and
 the decoder's use of it."""
 
@@ -9,9 +9,8 @@ import pytest
 
 import lfstream
 from lfstream.codec.bitstream import CODEC_JPEG, StreamWriter, split_stream
-from lfstream.codec.encoder import Encoder
-from lfstream.codec.hance import measure_hance_map, tile_edges
-from lfstream.codec.jpeg import (
+from lfstream.codec.centre.hance import measure_hance_map, tile_edges
+from lfstream.codec.centre.jpeg import (
     HANCE_LEVELS,
     PostFilterChoice,
     blend_restored,
@@ -23,6 +22,7 @@ from lfstream.codec.jpeg import (
     with_hance_map,
     with_post_filter,
 )
+from lfstream.codec.encoder import Encoder
 from lfstream.errors import BitstreamError, LFValueError
 from lfstream.metrics import mpsnr
 from lfstream.synth import synth_clip
@@ -98,7 +98,7 @@ def test_the_measurement_keeps_the_level_whose_warp_is_closest_per_tile():
     with pytest.raises(LFValueError, match="tiles"):
         measure_hance_map(views, blurred, restored, d, tiles=0)
     # level 0's warp given (the encoder's reference decode): the same map; a wrong one counts
-    from lfstream.codec.warp import warp_views
+    from lfstream.codec.warp.cpu import warp_views
 
     plain = warp_views(blurred, d, (3, 3))
     assert np.array_equal(measure_hance_map(views, blurred, restored, d, tiles=4, warped=plain), levels)
@@ -205,7 +205,7 @@ def test_the_default_encode_marks_its_jpeg_frames_and_the_option_is_checked(clip
 
 
 def test_the_strength_terms_kernel_equals_numpy_over_the_views_present(rng):
-    from lfstream.codec.hance_kernels import strength_error_terms
+    from lfstream.codec.centre.hance_kernels import strength_error_terms
 
     plain, restored, ref = rng.integers(0, 256, (3, 3, 4, 9, 11, 3), dtype=np.uint8)
     present = rng.random((3, 4)) < 0.6
@@ -221,9 +221,9 @@ def test_the_measured_levels_are_the_blend_and_warp_per_level_within_rounding(cl
     a warp per level, each rounded to 8 bits): the same level on nine tiles in ten, and
     every tile's level within 2 % of the best level's error."""
     from lfstream.codec.bitstream import iter_packets, read_header
+    from lfstream.codec.centre.jpeg import blend_restored
     from lfstream.codec.decoder import Decoder
-    from lfstream.codec.jpeg import blend_restored
-    from lfstream.codec.warp import warp_views
+    from lfstream.codec.warp.cpu import warp_views
 
     lf = clip_lf[0]
     data = lfstream.encode(lf, quality=30, preset="fast")
