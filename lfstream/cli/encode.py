@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import time
 
 from lfstream.cli._common import (
     EXIT_INTERRUPTED,
@@ -16,7 +15,6 @@ from lfstream.cli._common import (
     path_arg,
     read_input,
 )
-from lfstream.codec.encoder import DEFAULT_PRESET
 from lfstream.codec.hint import HintOptions
 
 HELP = "encode a light field or LF video to an .lfs stream (JPEG or AV1 centre view + depth hint)"
@@ -40,10 +38,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfstream.codec.api import with_default_hance_map
-    from lfstream.codec.bitstream import with_present
-    from lfstream.codec.encoder import Encoder, encode_file, write_stream_file
-    from lfstream.codec.rate import RATE_CONTROL_CHOOSES, choose_default, rate_control_conflict, uses_default_choice
+    from lfstream.codec.rate import RATE_CONTROL_CHOOSES, rate_control_conflict
+    from lfstream.codec.stream_encoder import CodingOptions, StreamEncoder, encode_file
     from lfstream.errors import LFValueError
     from lfstream.io.outputs import check_output
     from lfstream.metrics import bpp
@@ -51,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_output(args.output, [args.input], overwrite=args.overwrite, kinds=(".lfs",))
     check_device(args.device)  # a bad device fails before any reading or encoding
-    # options that do not go together fail before the input is read (whole, for --bpp)
+    # options that do not go together fail before the input is read
     if args.bpp is not None:
         conflict = rate_control_conflict(args.residual, args.residual_mode, hance_map=args.hance_map)
         if conflict:
@@ -59,51 +55,30 @@ def run(args: argparse.Namespace) -> int:
             raise LFValueError(f"{flag}: rate control (--bpp) {RATE_CONTROL_CHOOSES[conflict]}")
     if args.residual_mode != "prediction" and args.residual is None:
         raise LFValueError("--residual-mode: needs --residual Q (the layer's quality)")
-    # rate control (--bpp) encodes every frame while it searches: it reads the input whole
-    source = read_input(args, whole=args.bpp is not None)
-    frames, present, views, size = source.frames, source.present, source.first.shape[:2], source.first.shape[2:4]
+    source = read_input(args)
+    frames, present = source.frames, source.present
     fps = args.fps or source.fps or 30.0
-    quality, depth_hint, rate, preset = args.quality, args.depth_hint, None, args.preset or DEFAULT_PRESET
-    residual, residual_mode = args.residual, args.residual_mode
-    prediction_db = None  # the default's check of its own prediction (rate.choose_default)
-    stop = None  # Ctrl-C / SIGTERM: the frames encoded so far are kept (not under --bpp's search)
-    hance_mapped = False  # strength maps sent (not where the default codes the views themselves)
-    hint_scale = HintOptions().hint_scale  # the hint's resolution divisor (the default may double it)
-    if args.bpp is not None:
-        from lfstream.codec.rate import choose_rate
-
-        # rate control encodes every frame while it searches: its stream is written as it is
-        t0 = time.perf_counter()
-        rate = choose_rate(source.whole, args.bpp, fps, present, preset=args.preset)
-        quality, depth_hint, preset, residual = rate.quality, rate.depth_hint, rate.preset, rate.residual
-        residual_mode = rate.residual_mode
-        hint_scale = rate.header.meta.get("hint", {}).get("hint_scale", hint_scale)
-        stats = write_stream_file(args.output, with_present(rate.header, present), rate.packets)
-        stats.encode_s = time.perf_counter() - t0  # the search included
-    elif uses_default_choice(args.preset, depth_hint, residual, residual_mode):
-        # the default: the centre's coding by the number of views, or the views themselves
-        # where the prediction misses them
-        t0 = time.perf_counter()
-        choice = choose_default(source.first, quality, present, device=args.device)
-        enc, first = choice.encoder, choice.first
-        if args.hance_map:
-            first = with_default_hance_map(enc, first, source.first, present)
-        hance_mapped = enc.hance_map
-        first_s = time.perf_counter() - t0
-        preset, depth_hint, residual, residual_mode = enc.preset, enc.depth_hint, enc.residual, enc.residual_mode
-        with FrameBoundaryStop() as stop:
-            stats = encode_file(stop.frames(frames), args.output, views, size, enc, fps=fps, present=present,
-                                first=first)
-        stats.encode_s += first_s  # frame 0's fast encode and the check
-        prediction_db = choice.prediction_db
-        hint_scale = enc.hint_options.hint_scale
-    else:
-        with FrameBoundaryStop() as stop:
-            stats = encode_file(stop.frames(frames), args.output, views, size,
-                                Encoder(quality=quality, depth_hint=depth_hint, preset=preset, residual=residual,
-                                        residual_mode=residual_mode, device=args.device, hance_map=args.hance_map),
-                                fps=fps, present=present)
-        hance_mapped = args.hance_map
+    stream = StreamEncoder(CodingOptions(quality=args.quality, bpp=args.bpp, preset=args.preset,
+                                         depth_hint=args.depth_hint, residual=args.residual,
+                                         residual_mode=args.residual_mode, hance_map=args.hance_map,
+                                         device=args.device), fps, present)
+    # Ctrl-C / SIGTERM: the frames encoded so far are kept
+    with FrameBoundaryStop() as stop:
+        stats = encode_file(stop.frames(frames), args.output, stream)
+    if stream.frames == 0:  # stopped before the first frame: nothing was written
+        emit(args, {"output": None, "frames": 0, "interrupted": True},
+             lambda r: "interrupted before the first frame: nothing written")
+        return EXIT_INTERRUPTED
+    enc, rate = stream.encoder, stream.rate
+    coding = stream.coding()
+    quality, depth_hint, preset = coding["quality"], coding["depth_hint"], coding["preset"]
+    residual, residual_mode = coding["residual"], coding["residual_mode"] or args.residual_mode
+    hint_scale = coding["hint_scale"] or HintOptions().hint_scale
+    if rate is not None:  # what rate control chose on the first frame (the follower moves it later)
+        quality, depth_hint, preset, residual, residual_mode = (rate.quality, rate.depth_hint, rate.preset,
+                                                                rate.residual, rate.residual_mode)
+    hance_mapped = enc.hance_map
+    prediction_db = stream.prediction_db
     shape = (stats.frames, *source.first.shape)  # a video read frame by frame: as many as were encoded
     result = dataclasses.asdict(stats)
     result.update({"output": str(args.output), "bpp": bpp(stats.bytes, shape),

@@ -54,36 +54,35 @@ class EncodeOptions:
             Encoder(preset=self.preset or DEFAULT_PRESET, residual=self.residual, residual_mode=self.residual_mode,
                     hance_map=True)
 
+    def coding(self):
+        """These options as the stream encoder's
+        (:class:`lfstream.codec.stream_encoder.CodingOptions`)."""
+        from lfstream.codec.stream_encoder import CodingOptions
+
+        return CodingOptions(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset,
+                             residual=self.residual, residual_mode=self.residual_mode,
+                             hint_options=self.hint_options, hance_map=self.hance_map)
+
     def for_input(self, first: np.ndarray, present: np.ndarray | None = None) -> EncodeOptions:
         """These options with the preset (and, where the default codes the views, the residual)
-        fixed for an input whose first frame is ``first``: what ``lfstream encode`` chooses."""
+        fixed for an input whose first frame is ``first``: what ``lfstream encode`` chooses
+        (:meth:`lfstream.codec.stream_encoder.StreamEncoder.fixed_options`, the hint's
+        resolution included)."""
         from dataclasses import replace
 
-        from lfstream.codec.rate import choose_default, uses_default_choice
+        from lfstream.codec.stream_encoder import StreamEncoder
 
-        if self.preset is not None:
-            return self
-        if not uses_default_choice(None, self.depth_hint, self.residual):
-            return replace(self, preset="fast")
-
-        # the whole choice, the hint's resolution included (an input whose first frame takes
-        # the 1/8 hint was coded at 1/4 here before: 25 % more bytes than lfstream encode's)
-        enc = choose_default(first, self.quality, present, self.hint_options).encoder
-        return replace(self, preset=enc.preset, depth_hint=enc.depth_hint, residual=enc.residual,
-                       residual_mode=enc.residual_mode, hint_options=enc.hint_options,
-                       hance_map=self.hance_map and enc.takes_hance_map)
+        fixed = StreamEncoder(self.coding(), present=present).fixed_options(first)
+        return replace(self, preset=fixed.preset, depth_hint=fixed.depth_hint, residual=fixed.residual,
+                       residual_mode=fixed.residual_mode, hint_options=fixed.hint_options, hance_map=fixed.hance_map)
 
     def encoder(self):
         """A fresh :class:`~lfstream.codec.encoder.Encoder` with these options."""
-        from lfstream.codec.encoder import Encoder
+        from lfstream.codec.stream_encoder import StreamEncoder
 
         if self.preset is None:
             raise LFValueError("EncodeOptions: the preset is chosen per input (for_input) before encoding")
-        from lfstream.codec.hint import HintOptions
-
-        return Encoder(quality=self.quality, depth_hint=self.depth_hint, preset=self.preset, residual=self.residual,
-                       residual_mode=self.residual_mode, hint_options=self.hint_options or HintOptions(),
-                       hance_map=self.hance_map)
+        return StreamEncoder(self.coding()).named_encoder()
 
 
 @dataclass(frozen=True)
@@ -112,11 +111,14 @@ def encode_group(frames: np.ndarray, start: int, fps: float, options: EncodeOpti
     is a key frame); returns the packets packed, in order."""
     import time
 
+    from lfstream.codec.stream_encoder import StreamEncoder
+
     t0 = time.perf_counter()
-    enc = options.encoder()
-    packets = [pack_packet(enc.encode_frame(f, start + k, int(round((start + k) * 1e6 / fps)), present),
-                           enc.stream_version)
-               for k, f in enumerate(frames)]
+    if options.preset is None:
+        raise LFValueError("EncodeOptions: the preset is chosen per input (for_input) before encoding")
+    stream = StreamEncoder(options.coding(), fps, present, start=start)
+    packets = [stream.encode_frame(f) for f in frames]
+    packets = [pack_packet(p, stream.encoder.stream_version) for p in packets]
     return GroupResult(start, packets=packets, seconds=time.perf_counter() - t0)
 
 

@@ -11,6 +11,8 @@ Data flow, one module per step:
 - :mod:`~lfstream.codec.decoder`: packet -> light field (JPEG-Hance where it helps,
   disparity from the hint, flat or Depth-Net, the occlusion-aware warp of
   :mod:`~lfstream.codec.warp.cpu`, the gains).
+- :mod:`~lfstream.codec.stream_encoder`: one stream's encoder frame by frame (the first frame's
+  choice, the encoder, the budget the later frames follow), behind every front end.
 - :mod:`~lfstream.codec.api`: the entry points (encode, decode, iter_decode, decode_file).
 - :mod:`~lfstream.codec.rate`: rate control (preset, quality, hint precision for a bpp).
 - :mod:`~lfstream.codec.baseline`: the HEVC/AV1 pseudo-sequence the codec is judged against.
@@ -30,8 +32,9 @@ from lfstream.codec.decoder import (
     DecodedFrame,
     Decoder,
 )
-from lfstream.codec.encoder import ENCODER_NAME, Encoder, EncodeStats, encode_file, frames_of
+from lfstream.codec.encoder import ENCODER_NAME, Encoder, EncodeStats, frames_of
 from lfstream.codec.hint import HintOptions
+from lfstream.codec.stream_encoder import CodingOptions, StreamEncoder, encode_file
 
 __all__ = [
     "BATCH_RANGE",
@@ -53,6 +56,8 @@ __all__ = [
     "iter_decode",
     "decode_file",
     "encode_file",
+    "StreamEncoder",
+    "CodingOptions",
     "frames_of",
     "encode_jpeg",
     "decode_jpeg",

@@ -21,20 +21,17 @@ from lfstream.codec.bitstream import (
     header_present,
     iter_packets,
     read_header,
-    with_present,
 )
 from lfstream.codec.decoder import BATCH_RANGE, DecodedFrame, Decoder
-from lfstream.codec.encoder import DEFAULT_PRESET, Encoder, frames_of
+from lfstream.codec.encoder import frames_of
 from lfstream.codec.hint import HintOptions
 from lfstream.codec.rate import (
     RATE_CONTROL_CHOOSES,
-    choose_default,
-    choose_rate,
     rate_control_conflict,
-    uses_default_choice,
 )
+from lfstream.codec.stream_encoder import CodingOptions, StreamEncoder
 from lfstream.errors import BitstreamError, LFFileError, LFStreamError, LFValueError
-from lfstream.lightfield import check_first_frame, check_lf, frames_in_range
+from lfstream.lightfield import check_first_frame, frames_in_range
 
 
 def encode(
@@ -105,38 +102,15 @@ def encode(
         conflict = rate_control_conflict(residual, residual_mode, post_filter, hance_map)
         if conflict:
             raise LFValueError(f"{conflict}: rate control (bpp) {RATE_CONTROL_CHOOSES[conflict]}")
-        # rate control encoded every frame already: its stream is the answer
-        return choose_rate(frames, bpp, fps, present, hint_options, gain_grid, preset=preset).stream(present)
-    first = None
-    if uses_default_choice(preset, depth_hint, residual, residual_mode):
-        check_lf(frames[0], allow_video=False)
-        choice = choose_default(frames[0], quality, present, hint_options, gain_grid, post_filter=post_filter,
-                                device=device)
-        enc, first = choice.encoder, choice.first
-        if hance_map:
-            first = with_default_hance_map(enc, first, frames[0], present)
-    else:
-        enc = Encoder(quality=quality, depth_hint=depth_hint, hint_options=hint_options or HintOptions(),
-                      gain_grid=gain_grid, preset=preset or DEFAULT_PRESET, residual=residual,
-                      residual_mode=residual_mode, post_filter=post_filter, device=device, hance_map=hance_map)
+    stream = StreamEncoder(CodingOptions(quality=quality, bpp=bpp, preset=preset, depth_hint=depth_hint, residual=residual,
+                                         residual_mode=residual_mode, post_filter=post_filter, hance_map=hance_map,
+                                         device=device, hint_options=hint_options, gain_grid=gain_grid), fps, present)
+    packets = [stream.encode_frame(frame) for frame in frames]
     buf = io.BytesIO()
-    writer = StreamWriter(buf, with_present(enc.header(tuple(frames.shape[1:3]), tuple(frames.shape[3:5]), fps), present))
-    for t, frame in enumerate(frames):
-        writer.write(first if t == 0 and first is not None else
-                     enc.encode_frame(frame, t, int(round(t * 1e6 / fps)), present))
+    writer = StreamWriter(buf, stream.header)
+    for packet in packets:
+        writer.write(packet)
     return buf.getvalue()
-
-
-def with_default_hance_map(encoder: Encoder, first: Packet | None, frame: np.ndarray,
-                           present: np.ndarray | None = None) -> Packet | None:
-    """The default encode (:func:`lfstream.codec.rate.choose_default`) with JPEG-Hance strength
-    maps: where its ``encoder`` codes a JPEG centre view, it sends them from frame 0 on
-    (``first``, the packet the choice coded, is marked; it is final: any coarser hint is in
-    it); where the choice codes the views themselves (AV1), nothing changes."""
-    if not encoder.takes_hance_map:
-        return first
-    encoder.hance_map = True
-    return first if first is None else encoder.mark_hance(first, frame, present)
 
 
 def iter_decode(fh, depth: str = "auto", occlusion: bool = True, limits: Limits = Limits(),
@@ -382,5 +356,5 @@ def _errors_naming(path: str | os.PathLike) -> Iterator[None]:
         raise BitstreamError(f"{path}: {exc}") from exc
 
 
-__all__ = ["encode", "with_default_hance_map", "decode", "iter_decode", "decode_file", "lfs_frames", "stack_frames",
+__all__ = ["encode", "decode", "iter_decode", "decode_file", "lfs_frames", "stack_frames",
            "video_array", "frames_array", "VIDEO_ARRAY_MEMORY_SHARE"]

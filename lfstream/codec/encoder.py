@@ -12,14 +12,13 @@ fixed zstd levels, sorted JSON metadata).
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_version, with_present
+from lfstream.codec.bitstream import Packet, StreamHeader, StreamWriter, stream_version
 from lfstream.codec.centre import CentreCoding, encode_centre
 from lfstream.codec.centre.av1 import AV1_MIN_VIEW, av1_fits
 from lfstream.codec.centre.jpeg import QUALITY_RANGE, PostFilterChooser
@@ -390,7 +389,7 @@ def residual_meta(quality: int, svt_preset: int, mode: str = "prediction") -> di
 
 @dataclass
 class EncodeStats:
-    """What :func:`encode_file` wrote."""
+    """What :func:`lfstream.codec.stream_encoder.encode_file` wrote."""
 
     frames: int = 0
     bytes: int = 0
@@ -425,29 +424,5 @@ def write_stream_file(path: str | os.PathLike, header: StreamHeader, packets: It
     return stats
 
 
-def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, views: tuple[int, int], size: tuple[int, int],
-                encoder: Encoder, fps: float = 30.0, present: np.ndarray | None = None,
-                first: Packet | None = None) -> EncodeStats:
-    """Encodes frames into an ``.lfs`` file, written atomically; returns byte counts and timing.
-    ``first``: frame 0's packet where ``encoder`` coded it already
-    (:func:`lfstream.codec.rate.choose_default`)."""
-    spent = 0.0
-
-    def packets():
-        nonlocal spent
-        for t, frame in enumerate(frames):
-            if t == 0 and first is not None:
-                yield first
-                continue
-            t0 = time.perf_counter()
-            packet = encoder.encode_frame(frame, t, int(round(t * 1e6 / fps)), present)
-            spent += time.perf_counter() - t0
-            yield packet
-
-    stats = write_stream_file(path, with_present(encoder.header(views, size, fps), present), packets())
-    stats.encode_s = spent
-    return stats
-
-
-__all__ = ["ENCODER_NAME", "PRESETS", "DEFAULT_PRESET", "preset_coding", "Encoder", "EncodeStats", "encode_file",
+__all__ = ["ENCODER_NAME", "PRESETS", "DEFAULT_PRESET", "preset_coding", "Encoder", "EncodeStats",
            "residual_meta", "write_stream_file", "frames_of"]

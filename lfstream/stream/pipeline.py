@@ -139,6 +139,19 @@ class Pipeline:
         finally:
             self._prepared.set()
 
+    def _warm(self, done: threading.Event) -> None:
+        """Loads the stages' compiled kernels (:func:`lfstream.stream.warmup.warm_kernels`),
+        then sets ``done``; whatever fails here fails again in its stage, which reports it
+        with the stage and frame."""
+        try:
+            from lfstream.stream.warmup import warm_kernels
+
+            warm_kernels(self.config, decode=self.sender is None)
+        except Exception:  # noqa: BLE001 - see the docstring
+            pass
+        finally:
+            done.set()
+
     def stop(self) -> None:
         """Stops every stage (Ctrl-C); the run then reports ``interrupted``."""
         self.interrupted = True
@@ -171,25 +184,29 @@ class Pipeline:
                 written so far are finalised).
         """
         cfg, ctl = self.config, self.control
-        from lfstream.stream.warmup import warm_kernels
-
         t_warm = time.perf_counter()
         if self.progress is not None:  # silent otherwise: a fresh install compiles here for most of a minute
             self.progress(WARMUP_STATUS if self.prepare is None else PREPARE_STATUS)
         preparing = None
-        if self.prepare is not None:
-            preparing = threading.Thread(target=self._prepare, name="lfstream-prepare", daemon=True)
-            preparing.start()
+        # the warm-up imports and loads modules on a thread of its own, so that this thread
+        # only waits: a Ctrl-C (or a SIGTERM relayed as one) that lands inside an import
+        # leaves that module's import lock held, and the source's thread importing the same
+        # module then waited for it forever
+        warmed = threading.Event()
         try:
-            try:
-                warm_kernels(cfg, decode=self.sender is None)
-            except Exception:  # noqa: BLE001 - the warm-up only loads kernels: whatever failed here
-                pass  # fails again in its stage, which reports it with the stage and frame
+            if self.prepare is not None:
+                preparing = threading.Thread(target=self._prepare, name="lfstream-prepare", daemon=True)
+                preparing.start()
+            threading.Thread(target=self._warm, args=(warmed,), name="lfstream-warmup", daemon=True).start()
+            while not warmed.wait(0.2):  # in slices: Ctrl-C reaches this thread meanwhile
+                pass
             if preparing is not None:
-                while not self._prepared.wait(0.2):  # in slices: Ctrl-C reaches this thread meanwhile
+                while not self._prepared.wait(0.2):
                     pass
         finally:
-            if preparing is not None and not self._prepared.is_set():  # Ctrl-C: the source stops and cleans up
+            # Ctrl-C: the source stops and cleans up (a thread the interrupt kept from
+            # starting has nothing to clean)
+            if preparing is not None and preparing.ident is not None and not self._prepared.is_set():
                 self._prepare_stop.set()
                 self._prepared.wait()
         t_start, cpu_start = time.perf_counter(), time.process_time()

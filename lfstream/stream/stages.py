@@ -17,11 +17,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from lfstream.codec.api import with_default_hance_map
-from lfstream.codec.bitstream import Packet, with_present
+from lfstream.codec.bitstream import Packet
 from lfstream.codec.decoder import DecodedFrame, Decoder
 from lfstream.codec.encoder import Encoder
-from lfstream.codec.rate import choose_default, choose_rate, uses_default_choice
+from lfstream.codec.stream_encoder import CodingOptions, StreamEncoder
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.lightfield import canonical_views
 from lfstream.stream.config import StreamConfig
@@ -214,54 +213,28 @@ class EncoderStage(ConsumerStage):
                  config: StreamConfig, expect_frames: bool, present: np.ndarray | None = None) -> None:
         super().__init__(control, stats, q_in)
         self.channel, self.config, self.expect_frames, self.present = channel, config, expect_frames, present
-        self.encoder = config.encoder()
+        cfg = config
+        # views_hint: the hint is sent even where the views are coded themselves (the focal
+        # planes are fitted to the decoded disparity)
+        self.stream = StreamEncoder(CodingOptions(quality=cfg.quality, bpp=cfg.bpp, preset=cfg.preset,
+                                                  depth_hint=cfg.depth_hint, residual=cfg.residual,
+                                                  residual_mode=cfg.residual_mode, hance_map=cfg.hance_map,
+                                                  views_hint=True), cfg.fps, present)
         self.rate = RateStats()
-        self.started = False
-        self.prediction_db: float | None = None  # the default's check of its prediction (rate.choose_default)
+
+    @property
+    def encoder(self) -> Encoder:
+        """The stream's encoder (before the first frame: the one the configuration describes)."""
+        return self.stream.encoder if self.stream.encoder is not None else self.config.encoder()
 
     def work(self, item: SourceFrame) -> Packet:
         lf = item.lf
-        if not self.started and self.config.bpp is not None:
-            # rate control on the first frame: the quality and hint the whole stream uses;
-            # views_hint: the focal planes are fitted to the decoded disparity
-            choice = choose_rate(lf[None], self.config.bpp, self.config.fps, self.present,
-                                          preset=self.config.preset, views_hint=True)
-            self.encoder = Encoder(quality=choice.quality, depth_hint=choice.depth_hint, preset=choice.preset,
-                                   hint_options=choice.hint_options, residual=choice.residual,
-                                   residual_mode=choice.residual_mode)
-        first = None
-        cfg = self.config
-        if not self.started and cfg.bpp is None and uses_default_choice(cfg.preset, cfg.depth_hint, cfg.residual,
-                                                                        cfg.residual_mode):
-            # the default's choice on the first frame (the centre's coding by the number of
-            # views, or the views themselves); the hint is sent either way (the focal planes
-            # are fitted to the decoded disparity)
-            choice = choose_default(lf, self.config.quality, self.present, views_hint=True)
-            self.encoder, first = choice.encoder, choice.first
-            self.prediction_db = choice.prediction_db
-            if cfg.hance_map:
-                first = with_default_hance_map(self.encoder, first, lf, self.present)
-        pixels = int(np.prod(lf.shape[:4]))
-        if not self.started:
-            self.channel.send_header(with_present(self.encoder.header(tuple(lf.shape[:2]), tuple(lf.shape[2:4]),
-                                                                      self.config.fps), self.present))
-            self.started = True
-        elif self.config.bpp is not None and self.rate.frame_bpp:
-            # later frames cost less than the key frame rate control measured: follow the budget
-            from lfstream.codec.rate import follow_rate
-
-            last = self.rate.frame_bpp[max(self.rate.frame_bpp)] * pixels
-            self.encoder.quality = follow_rate(self.encoder.quality, self.config.bpp, 8.0 * self.rate.bytes,
-                                               self.rate.pixels, last, pixels)
-            if self.encoder.codes_views:  # its bits are the views': one quality for all
-                self.encoder.residual = self.encoder.quality
-        if first is not None and item.seq == 0:
-            packet = first  # the default's choice coded frame 0 already
-        else:
-            packet = self.encoder.encode_frame(lf, item.seq, int(round(item.seq * 1e6 / self.config.fps)),
-                                               self.present)
-        self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain) + len(packet.residual), pixels,
-                      self.encoder.quality)
+        first = self.stream.frames == 0
+        packet = self.stream.encode_frame(lf)
+        if first:
+            self.channel.send_header(self.stream.header)
+        self.rate.add(item.seq, len(packet.image) + len(packet.hint) + len(packet.gain) + len(packet.residual),
+                      int(np.prod(lf.shape[:4])), self.stream.encoder.quality)
         return packet
 
     def coding(self) -> dict:
@@ -269,18 +242,19 @@ class EncoderStage(ConsumerStage):
         (and its resolution divisor, ``hint_scale``), residual layer, and the default's check
         of its prediction (``prediction_db``)."""
         enc = self.encoder
+        db = self.stream.prediction_db
         return {"preset": enc.preset, "quality": int(enc.quality), "depth_hint": bool(enc.depth_hint),
                 "hint_scale": int(enc.hint_options.hint_scale) if enc.depth_hint else None,
                 "residual": enc.residual, "residual_mode": enc.residual_mode if enc.residual is not None else None,
                 "hance_map": bool(enc.hance_map),
-                "prediction_db": None if self.prediction_db is None else round(float(self.prediction_db), 3)}
+                "prediction_db": None if db is None else round(float(db), 3)}
 
     def forward(self, packet: Packet) -> bool:
         return self.channel.send(packet, self.control.stop_event)
 
     def close(self, seq: int | None) -> None:
         try:
-            if not self.started and self.expect_frames and not self.control.stop_event.is_set():
+            if self.stream.frames == 0 and self.expect_frames and not self.control.stop_event.is_set():
                 self.control.fail(self.name, None, LFValueError("the source gave no frames"))
             self.channel.close(self.control.stop_event)
         except Exception as exc:

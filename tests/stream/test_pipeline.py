@@ -354,7 +354,11 @@ def test_prepare_runs_before_the_timed_stream_and_may_fail(tmp_path):
 
 def test_ctrl_c_during_the_warm_up_stops_prepare(tmp_path, monkeypatch):
     """Ctrl-C while the kernels load: the pipeline sets prepare's stop event and waits for
-    it to finish (a render stopped so removes its partial cache) before the interrupt goes on."""
+    it to finish (a render stopped so removes its partial cache) before the interrupt goes on.
+    The warm-up runs on a thread of its own, so the interrupt reaches the waiting main thread,
+    never an import in progress (which would leave that module's import lock held)."""
+    import _thread
+
     import lfstream.stream.warmup as warmup
 
     seen = {}
@@ -364,14 +368,16 @@ def test_ctrl_c_during_the_warm_up_stops_prepare(tmp_path, monkeypatch):
         seen["finished"] = True
 
     def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
+        seen["warm_thread"] = threading.current_thread() is not threading.main_thread()
+        _thread.interrupt_main()  # Ctrl-C, delivered to the main thread as the signal would be
+        time.sleep(0.5)
 
     monkeypatch.setattr(warmup, "warm_kernels", interrupted)
     out = prepare_output_dir(tmp_path / "out")
     t0 = time.perf_counter()
     with pytest.raises(KeyboardInterrupt):
         Pipeline(small_source(), StreamConfig(refocus="sas", save=()), out, prepare=prepare).run()
-    assert seen == {"stopped": True, "finished": True} and time.perf_counter() - t0 < 5.0
+    assert seen == {"warm_thread": True, "stopped": True, "finished": True} and time.perf_counter() - t0 < 5.0
 
 
 def test_plane_videos_play_everywhere_and_lossless_is_an_option(tmp_path):

@@ -38,6 +38,7 @@ from lfstream.codec.rate.default import (
     prediction_psnr,
     uses_default_choice,
 )
+from lfstream.codec.rate.follow import FRAME_CAP, FRAME_REDO, RateFollower, family_of
 from lfstream.codec.rate.model import choose_rate, model_configuration
 from lfstream.codec.rate.search import (
     COARSE_HINT_SCALE,
@@ -56,4 +57,4 @@ __all__ = ["RATE_CONTROL_CHOOSES", "rate_control_conflict", "validate_target",
            "HINT_COARSEN_MAX_LOSS_DB", "HINT_COARSEN_DB_PER_PERCENT", "coarsening_allowance",
            "DEFAULT_PRESET_BY_VIEWS", "default_preset", "RateChoice", "DefaultChoice",
            "choose_configuration", "choose_default", "choose_rate", "model_configuration", "uses_default_choice",
-           "follow_rate", "prediction_psnr"]
+           "follow_rate", "prediction_psnr", "FRAME_CAP", "FRAME_REDO", "RateFollower", "family_of"]

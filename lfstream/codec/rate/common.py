@@ -5,7 +5,7 @@ frame by frame (:func:`follow_rate`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -60,6 +60,9 @@ class RateChoice:
     hint_options: HintOptions = HintOptions()  # the chosen hint's options (the default without a hint)
     residual: int | None = None  # the residual layer's quality; None: no residual
     residual_mode: str = "prediction"  # what the residual codes (lfstream.codec.residual.RESIDUAL_MODES)
+    # the encoder after the frames coded, and the budget it follows (lfstream.codec.rate.follow);
+    # None where the choice kept no encoder (the searches recode the centre view apart)
+    follower: object | None = field(default=None, compare=False, repr=False)
 
     def stream(self, present: np.ndarray | None = None) -> bytes:
         """The chosen ``.lfs`` stream (recording ``present``, the views the source had)."""

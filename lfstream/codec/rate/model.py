@@ -47,15 +47,13 @@ from lfstream.codec.centre.jpeg import QUALITY_RANGE
 from lfstream.codec.encoder import Encoder, preset_coding
 from lfstream.codec.hint import HintOptions
 from lfstream.codec.rate.common import (
-    FOLLOW_MAX_STEP,
-    FOLLOW_STEP_GROWTH,
     RateChoice,
     _first_frame_mpsnr,
     _stream_bytes,
-    follow_rate,
     validate_target,
 )
 from lfstream.codec.rate.default import choose_default
+from lfstream.codec.rate.follow import RateFollower
 from lfstream.codec.rate.search import choose_configuration
 from lfstream.codec.residual import apply_residual, encode_residual, encode_views_keyed
 from lfstream.lightfield import centre_index, to_uint8
@@ -96,11 +94,6 @@ SEQUENCE_CODINGS = 3
 #: The lowest residual quality the model plans for: below it a residual codes little but
 #: noise, and the centre view gives up bytes instead.
 RESIDUAL_MIN_QUALITY = 2
-#: The most one frame of a video may cost, in multiples of its share of the target.
-FRAME_CAP = 3.0
-#: A video frame whose size is off what the budget allows it by more than this factor (either
-#: way) is coded once more.
-FRAME_REDO = 1.25
 #: Bytes a frame of a sequence costs whatever it holds (AV1 frame headers and the payload's
 #: framing: a sequence of flat views measured 27-29 bytes a view at 96x128 to 352x512): kept
 #: out of the trial's scaling from the mosaic's pixels to the view's.
@@ -483,34 +476,9 @@ def model_configuration(frames: np.ndarray, target_bpp: float, fps: float, prese
         enc.preset, enc.coding, enc.quality, enc.post_filter = effort, coding, best.estimate.quality, False
         if best.family == "prediction":
             enc.residual, enc.residual_mode = int(best.estimate.residual), "prediction"
-    packets = [best.packet]
-    spent = 8.0 * _stream_bytes(best.header, [best.packet])
-    pixels = int(np.prod(f0.shape[:4]))
-    last = 8.0 * _packet_bytes(best.header, best.packet)
-    for t in range(1, len(frames)):
-        ts = int(round(t * 1e6 / fps))
-        frame = frames[t]
-        q0 = int(enc.quality)
-        q = follow_rate(q0, target_bpp, spent, t * pixels, last, pixels)
-        _set_quality(enc, q, best.family, q - q0)
-        pkt = enc.encode_frame(frame, t, ts, present)
-        got = pkt.size(best.header.version)
-        allowed = max(target_bpp * (t + 1) * pixels / 8.0 - spent / 8.0, 1.0)
-        if got > FRAME_CAP * budget or not 1 / FRAME_REDO <= got / allowed <= FRAME_REDO:
-            # past the bound, or far off what the budget allows: coded once more at the
-            # quality the follower's size model gives (a frame over the bound at least as low
-            # as one step of the follower)
-            step = int(np.clip(round(np.log(allowed / got) / np.log1p(FOLLOW_STEP_GROWTH)), -3 * FOLLOW_MAX_STEP,
-                               3 * FOLLOW_MAX_STEP))
-            if got > FRAME_CAP * budget:
-                step = min(step, -FOLLOW_MAX_STEP)
-            q2 = int(np.clip(q + step, *QUALITY_RANGE))
-            if q2 != q:
-                _set_quality(enc, q2, best.family, q2 - q)
-                pkt = enc.encode_frame(frame, t, ts, present)
-        last = 8.0 * pkt.size(best.header.version)
-        spent += last
-        packets.append(pkt)
+    follower = RateFollower.after(enc, best.family, best.header, best.packet, target_bpp, int(np.prod(f0.shape[:4])))
+    packets = [best.packet] + [follower.encode_frame(frames[t], t, int(round(t * 1e6 / fps)), present)
+                               for t in range(1, len(frames))]
     total = _stream_bytes(best.header, packets)
     report = []
     hint_scale = choice.encoder.hint_options.hint_scale
@@ -530,18 +498,7 @@ def model_configuration(frames: np.ndarray, target_bpp: float, fps: float, prese
     return RateChoice(int(hdr.quality), bool(hdr.has_hint), bpp_of(total, frames.shape), best.db, tuple(report), hdr,
                       tuple(packets), effort, enc.hint_options if hdr.has_hint else HintOptions(),
                       None if best.family == "centre" else best.estimate.residual,
-                      "prediction" if best.family != "views" else "views")
-
-
-def _set_quality(encoder, quality: int, family: str, step: int) -> None:
-    """Moves a stream's qualities: the centre's; a residual's by the same step; the views'
-    sequence is one quality."""
-    lo, hi = QUALITY_RANGE
-    encoder.quality = int(quality)
-    if family == "views":
-        encoder.residual = int(quality)
-    elif family == "prediction" and encoder.residual is not None:
-        encoder.residual = int(np.clip(encoder.residual + step, lo, hi))
+                      "prediction" if best.family != "views" else "views", follower)
 
 
 def choose_rate(frames: np.ndarray, target_bpp: float, fps: float, present: np.ndarray | None = None,

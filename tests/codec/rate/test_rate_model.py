@@ -9,8 +9,8 @@ import lfstream
 from lfstream.codec.centre.jpeg import QUALITY_RANGE
 from lfstream.codec.rate import SEARCHES
 from lfstream.codec.rate import model as rate_model
+from lfstream.codec.rate.follow import FRAME_CAP
 from lfstream.codec.rate.model import (
-    FRAME_CAP,
     RATE_TOLERANCE_MODEL,
     SEQUENCE_CODINGS,
     _crop,
