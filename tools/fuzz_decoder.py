@@ -41,20 +41,17 @@ def repair_crcs(data: bytes) -> bytes:
     allows finding them; bytes past what can be parsed are left as they are."""
     from lfstream.codec.bitstream import _HEADER_FIXED as _HEADER  # the container's own layouts
     from lfstream.codec.bitstream import _PACKET_FIXED as _PACKET
-    from lfstream.codec.bitstream import _PACKET_FIXED_V3 as _PACKET_V3
-    from lfstream.codec.bitstream import VERSION_RESIDUAL
 
     out = bytearray(data)
     if len(out) < _HEADER.size:
         return bytes(out)
-    fields = _HEADER.unpack_from(out)
-    version, meta_len = fields[1], fields[-1]
+    meta_len = _HEADER.unpack_from(out)[-1]
     end = _HEADER.size + meta_len
     if end + 4 > len(out):
         return bytes(out)
     struct.pack_into("<I", out, end, zlib.crc32(out[:end]))
     pos = end + 4
-    layout = _PACKET_V3 if version >= VERSION_RESIDUAL else _PACKET
+    layout = _PACKET
     while pos + layout.size <= len(out):
         lengths = layout.unpack_from(out, pos)[3:]
         stop = pos + layout.size + sum(lengths)

@@ -1,21 +1,18 @@
 """The ``.lfs`` bitstream: a file header, then one packet per light-field frame.
 
-Version 1 layout (all integers little-endian); version 2 is the same layout with one more
-centre-view codec (``codec`` 2: an AV1 key frame, :mod:`lfstream.codec.centre.av1`); version 3
-adds the residual layer (:mod:`lfstream.codec.residual`): header flag bit 1 and one more
-length and payload per packet. A writer stamps the lowest version that expresses its
-stream, so a JPEG stream without a residual is still version 1 and version-1 readers keep
-reading it; this reader reads all three.
+One format, version 4 (all integers little-endian). Streams of the versions before it (1 to
+3, made by development builds of lfstream) are refused with one line that says so: re-encode
+them.
 
 File header::
 
     magic        4 bytes  b"\\x89LFS"
-    version      u16      1
-    flags        u16      bit 0: packets may carry a depth hint; bit 1 (version 3): a residual layer
+    version      u16      4
+    flags        u16      bit 0: packets may carry a depth hint; bit 1: a residual layer
     views        u8, u8   U, V
     size         u16, u16 H, W
     fps_milli    u32      frame rate x 1000
-    codec        u8       centre view: 1 = JPEG (every version), 2 = AV1 key frame (version 2 and 3)
+    codec        u8       centre view: 1 = JPEG, 2 = AV1 key frame
     quality      u8       centre-view quality 1..100 (JPEG quality; AV1: CRF 63..1)
     meta_coding  u16      0: zstd; 1: zstd with the built-in dictionary (:data:`META_DICTIONARY`)
     meta_len     u32      length of the metadata block
@@ -31,12 +28,12 @@ Packet (the unit every transport carries)::
     hint_len     u32      length of the depth hint (0: none)
     gain_len     u32      length of the per-view gain maps (0: none)
     meta_len     u32      length of the per-frame metadata (0: none)
-    residual_len u32      version 3 only: length of the residual layer (0: none)
+    residual_len u32      length of the residual layer (0: none; always 0 without the header's flag)
     image        bytes
     hint         bytes    zstd-compressed quantised disparity (see :mod:`lfstream.codec.hint`)
     gain         bytes    per-view brightness gains (see :mod:`lfstream.codec.gains`)
     meta         bytes    zstd-compressed JSON
-    residual     bytes    version 3 only: the residual views (see :mod:`lfstream.codec.residual`)
+    residual     bytes    the residual views (see :mod:`lfstream.codec.residual`)
     crc          u32      CRC32 of the packet from ``sync`` to the end of the last payload
 
 A parser checks every length and dimension against :class:`Limits` before it allocates
@@ -62,21 +59,18 @@ from lfstream.lightfield import MAX_VIEW_SIDE, MAX_VIEWS_PER_AXIS
 
 MAGIC = b"\x89LFS"
 SYNC = b"LFPK"
-VERSION = 3  # the newest this module reads and writes; see stream_version()
-VERSIONS = (1, 2, 3)
+#: The one format version this module reads and writes.
+VERSION = 4
+#: Versions written by development builds before it: refused with a line that says so.
+OLDER_VERSIONS = (1, 2, 3)
 CODEC_JPEG = 1
 CODEC_AV1 = 2
 CODEC_NAMES = {CODEC_JPEG: "jpeg", CODEC_AV1: "av1"}
-#: The centre-view codecs each version may carry.
-VERSION_CODECS = {1: (CODEC_JPEG,), 2: (CODEC_JPEG, CODEC_AV1), 3: (CODEC_JPEG, CODEC_AV1)}
-#: The first version whose packets carry a residual layer.
-VERSION_RESIDUAL = 3
 FLAG_HINT = 1
 FLAG_RESIDUAL = 2
 
 _HEADER_FIXED = struct.Struct("<4sHHBBHHIBBHI")  # up to and including meta_len
-_PACKET_FIXED = struct.Struct("<4sIQIIII")
-_PACKET_FIXED_V3 = struct.Struct("<4sIQIIIII")  # + residual_len
+_PACKET_FIXED = struct.Struct("<4sIQIIIII")  # up to and including residual_len
 _CRC = struct.Struct("<I")
 
 
@@ -106,8 +100,8 @@ class StreamHeader:
 
     @property
     def version(self) -> int:
-        """The lowest format version that carries this stream (see :func:`stream_version`)."""
-        return stream_version(self.codec, self.has_residual)
+        """The stream's format version (:data:`VERSION`)."""
+        return VERSION
 
     def max_payload(self, limits: Limits) -> int:
         h, w = self.size
@@ -159,25 +153,29 @@ class Packet:
     meta: bytes = b""
     residual: bytes = b""
 
-    def size(self, version: int) -> int:
-        """Bytes this packet takes in a stream of ``version``."""
-        fixed = _PACKET_FIXED_V3 if version >= VERSION_RESIDUAL else _PACKET_FIXED
-        return (fixed.size + len(self.image) + len(self.hint) + len(self.gain) + len(self.meta) + len(self.residual)
-                + _CRC.size)
+    def size(self, version: int = VERSION) -> int:
+        """Bytes this packet takes in a stream (of ``version``: the one there is)."""
+        _check_version(version)
+        return (_PACKET_FIXED.size + len(self.image) + len(self.hint) + len(self.gain) + len(self.meta)
+                + len(self.residual) + _CRC.size)
 
     @property
     def nbytes(self) -> int:
-        """Bytes in the lowest version that carries it (3 with a residual, else 1 or 2)."""
-        return self.size(VERSION_RESIDUAL if self.residual else 1)
+        """Bytes this packet takes in a stream."""
+        return self.size()
+
+
+def _check_version(version: int) -> None:
+    if version != VERSION:
+        raise LFValueError(f"version: lfstream writes format version {VERSION}, got {version!r}")
 
 
 def stream_version(codec: int, residual: bool = False) -> int:
-    """The lowest ``.lfs`` version that can carry a centre view in ``codec`` (and, with
-    ``residual``, a residual layer)."""
-    for version in VERSIONS:
-        if codec in VERSION_CODECS[version] and (not residual or version >= VERSION_RESIDUAL):
-            return version
-    raise BitstreamError(f"header: unknown codec id {codec}")
+    """The format version of a stream whose centre view is coded by ``codec`` (with or
+    without a residual layer): :data:`VERSION`, once the codec is known."""
+    if codec not in CODEC_NAMES:
+        raise BitstreamError(f"header: unknown codec id {codec}")
+    return VERSION
 
 
 #: The header's metadata is a few hundred bytes of JSON that zstd alone barely shrinks
@@ -267,17 +265,13 @@ def pack_header(header: StreamHeader) -> bytes:
     return body + _CRC.pack(zlib.crc32(body))
 
 
-def pack_packet(packet: Packet, version: int = 1) -> bytes:
-    """A packet's bytes in a stream of ``version`` (the header's :attr:`StreamHeader.version`)."""
+def pack_packet(packet: Packet, version: int = VERSION) -> bytes:
+    """A packet's bytes in a stream (of ``version``: the one there is)."""
+    _check_version(version)
     if packet.seq < 0 or packet.seq >= 1 << 32 or packet.timestamp_us < 0:
         raise LFValueError(f"packet: sequence number or timestamp out of range ({packet.seq}, {packet.timestamp_us})")
-    lengths = (len(packet.image), len(packet.hint), len(packet.gain), len(packet.meta))
-    if version >= VERSION_RESIDUAL:
-        fixed = _PACKET_FIXED_V3.pack(SYNC, packet.seq, packet.timestamp_us, *lengths, len(packet.residual))
-    elif packet.residual:
-        raise LFValueError(f"packet {packet.seq}: a residual layer needs a version-{VERSION_RESIDUAL} stream")
-    else:
-        fixed = _PACKET_FIXED.pack(SYNC, packet.seq, packet.timestamp_us, *lengths)
+    lengths = (len(packet.image), len(packet.hint), len(packet.gain), len(packet.meta), len(packet.residual))
+    fixed = _PACKET_FIXED.pack(SYNC, packet.seq, packet.timestamp_us, *lengths)
     body = fixed + packet.image + packet.hint + packet.gain + packet.meta + packet.residual
     return body + _CRC.pack(zlib.crc32(body))
 
@@ -295,14 +289,13 @@ def read_header(fh: BinaryIO, limits: Limits = Limits()) -> StreamHeader:
     magic, version, flags, u, v, h, w, fps_milli, codec, quality, meta_coding, meta_len = _HEADER_FIXED.unpack(fixed)
     if magic != MAGIC:
         raise BitstreamError("header: not an lfstream .lfs stream (bad magic)")
-    if version not in VERSIONS:
-        raise BitstreamError(f"header: unsupported version {version} (this reader knows {', '.join(map(str, VERSIONS))})")
-    if codec not in VERSION_CODECS[version]:
-        raise BitstreamError(f"header: codec id {codec} is not part of version {version}")
-    if bool(flags & FLAG_RESIDUAL) != (version >= VERSION_RESIDUAL):
-        # writers stamp the lowest version: version 3 exactly when there is a residual layer
-        raise BitstreamError(f"header: residual flag {'set' if flags & FLAG_RESIDUAL else 'clear'} in a "
-                             f"version-{version} stream")
+    if version in OLDER_VERSIONS:
+        raise BitstreamError(f"header: format version {version}, made by an older lfstream; re-encode it "
+                             f"(this reader reads version {VERSION})")
+    if version != VERSION:
+        raise BitstreamError(f"header: unsupported format version {version} (this reader reads version {VERSION})")
+    if codec not in CODEC_NAMES:
+        raise BitstreamError(f"header: unknown codec id {codec}")
     if meta_len > limits.max_meta_bytes:
         raise BitstreamError(f"header: metadata length {meta_len} exceeds {limits.max_meta_bytes}")
     if meta_coding not in (META_PLAIN, META_WITH_DICTIONARY):
@@ -329,14 +322,13 @@ def read_packet(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits(), e
         BitstreamError: truncated packet, bad sync, lengths over the limits, CRC mismatch.
     """
     frame = expect_seq
-    layout = _PACKET_FIXED_V3 if header.has_residual else _PACKET_FIXED
+    layout = _PACKET_FIXED
     fixed = _read_exact(fh, layout.size)
     if not fixed:
         return None
     if len(fixed) < layout.size:
         raise BitstreamError(f"truncated packet header ({len(fixed)} of {layout.size} bytes)", frame)
-    sync, seq, ts, image_len, hint_len, gain_len, meta_len, *rest = layout.unpack(fixed)
-    residual_len = rest[0] if rest else 0
+    sync, seq, ts, image_len, hint_len, gain_len, meta_len, residual_len = layout.unpack(fixed)
     if sync != SYNC:
         raise BitstreamError("bad packet sync marker (corrupt or not a packet boundary)", frame)
     frame = seq if expect_seq is None else expect_seq
@@ -347,6 +339,8 @@ def read_packet(fh: BinaryIO, header: StreamHeader, limits: Limits = Limits(), e
         raise BitstreamError(f"hint or gain length ({hint_len}, {gain_len}) exceeds {cap}", frame)
     if meta_len > limits.max_meta_bytes:
         raise BitstreamError(f"metadata length {meta_len} exceeds {limits.max_meta_bytes}", frame)
+    if residual_len and not header.has_residual:
+        raise BitstreamError(f"a residual layer of {residual_len} bytes in a stream whose header has none", frame)
     if residual_len > header.max_residual(limits):
         raise BitstreamError(f"residual length {residual_len} exceeds {header.max_residual(limits)}", frame)
     total = image_len + hint_len + gain_len + meta_len + residual_len
@@ -423,7 +417,7 @@ __all__ = [
     "count_packets",
     "MAGIC",
     "VERSION",
-    "VERSIONS",
+    "OLDER_VERSIONS",
     "CODEC_JPEG",
     "CODEC_AV1",
     "CODEC_NAMES",

@@ -168,7 +168,7 @@ class Encoder:
             raise LFValueError(f"{what}: AV1 codes views of at least {AV1_MIN_VIEW} pixels{half}, these are "
                                f"{size[0]}x{size[1]}; use the fast preset (JPEG) without a residual")
         meta = {"encoder": ENCODER_NAME, "version": __version__, "quality": int(self.quality), "gain_grid": self.gain_grid}
-        if self.coding.codec != "jpeg":  # JPEG streams keep the version-1 header byte for byte
+        if self.coding.codec != "jpeg":  # the AV1 presets' settings (a JPEG stream's header stays short)
             meta["preset"] = self.preset
             coding = CentreCoding("av1", self.residual_speed) if self.keys_views else self.coding
             meta["centre"] = coding.as_meta(self.quality)

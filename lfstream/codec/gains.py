@@ -11,14 +11,13 @@ the centre's samples appear in it (the hint's disparity), so a cell compares the
 surfaces and the gain captures shading, not the content parallax moves between views (on
 a camera array's large disparities coarse cells alone did not suffice).
 
-Payload, a full map (version 3): ``u8 version, u8 grid_h, u8 grid_w, u8 channels, u8 U,
-u8 V`` + the int8 values ``round(64 * log2(gain))``, shape ``(U, V, grid_h, grid_w,
-channels)``, plus 127 as one level image (rows ``(u, grid_y)``, columns ``(v, grid_x,
-channel)``) range coded with context-adaptive probabilities (:mod:`lfstream.codec._entropy`;
-19-27 % fewer bytes than zstd on the synthetic scenes); version 1 (before it) the same
-header + zstd of the values, still decoded. In a video (:class:`GainTracker`), the frames
-between key maps (every ``key_interval`` frames) send a delta (version 2): the same header
-plus ``u32 reference``, the frame whose map it changes, + zstd(uint8 ``(q - q_reference)
+Payload, a full map: ``u8 kind = 4, u8 grid_h, u8 grid_w, u8 channels, u8 U, u8 V`` + the
+int8 values ``round(64 * log2(gain))``, shape ``(U, V, grid_h, grid_w, channels)``, plus
+127 as one level image (rows ``(u, grid_y)``, columns ``(v, grid_x, channel)``) range coded
+with context-adaptive probabilities (:mod:`lfstream.codec._entropy`; 19-27 % fewer bytes
+than zstd on the synthetic scenes). In a video (:class:`GainTracker`), the frames between
+key maps (every ``key_interval`` frames) send a delta (``kind = 5``): the same header plus
+``u32 reference``, the frame whose map it changes, + zstd(uint8 ``(q - q_reference)
 mod 256``). Shading is a property of the camera, but the measured cells also move with the
 content (on the built-in clip 40 % of the values change by a step from frame to frame, 3-8 %
 by more), so the encoder keeps a cell's sent value until the measurement leaves it by more than
@@ -38,10 +37,12 @@ from lfstream.errors import BitstreamError, LFShapeError, LFValueError
 
 _HEADER = struct.Struct("<BBBBBB")
 _REFERENCE = struct.Struct("<I")
-VERSION = 1  # a full map, zstd (streams written before VERSION_CODED; still decoded)
-VERSION_DELTA = 2
-#: a full map range coded with context-adaptive probabilities (:mod:`lfstream.codec._entropy`)
-VERSION_CODED = 3
+#: The payload's first byte: a full map, range coded with context-adaptive probabilities
+#: (:mod:`lfstream.codec._entropy`), or a delta to an earlier frame's map. 1 to 3 were
+#: written by development builds and are refused with a line that says so.
+KIND_FULL = 4
+KIND_DELTA = 5
+OLDER_KINDS = (1, 2, 3)
 #: Steps (1.1 % each) a cell's measurement may move before the encoder sends the new value.
 GAIN_DEADBAND = 1
 _STEP = 64.0  # int8 units per octave: gains within 2**(+-127/64) ~ [0.25, 3.96], 1.1 % steps
@@ -140,7 +141,7 @@ def _compress(raw: bytes) -> bytes:
 
 
 def encode_gains(gains: np.ndarray) -> bytes:
-    """A full gain-map payload (version 1)."""
+    """A full gain-map payload."""
     return _full_payload(quantise_gains(gains))
 
 
@@ -157,7 +158,7 @@ def _full_payload(q: np.ndarray) -> bytes:
     from lfstream.codec._entropy import code_levels
 
     u, v, gh, gw, ch = q.shape
-    return _HEADER.pack(VERSION_CODED, gh, gw, ch, u, v) + code_levels(_as_image(q))
+    return _HEADER.pack(KIND_FULL, gh, gw, ch, u, v) + code_levels(_as_image(q))
 
 
 class GainReferenceError(BitstreamError):
@@ -168,21 +169,22 @@ def _parse(data: bytes, views: tuple[int, int], frame: int | None, refs: dict[in
     """The int8 values ``(U, V, gh, gw, C)`` of a payload (a delta resolved against ``refs``)."""
     if len(data) < _HEADER.size:
         raise BitstreamError("gain maps: truncated", frame)
-    version, gh, gw, ch, u, v = _HEADER.unpack_from(data)
-    if version not in (VERSION, VERSION_DELTA, VERSION_CODED) or ch not in (1, 3) or gh < 1 or gw < 1 \
-            or (u, v) != tuple(views):
-        raise BitstreamError(f"gain maps: bad header (version {version}, grid {gh}x{gw}, {ch} channels, views {u}x{v})",
+    kind, gh, gw, ch, u, v = _HEADER.unpack_from(data)
+    if kind in OLDER_KINDS:
+        raise BitstreamError(f"gain maps: payload kind {kind}, made by an older lfstream; re-encode the stream", frame)
+    if kind not in (KIND_FULL, KIND_DELTA) or ch not in (1, 3) or gh < 1 or gw < 1 or (u, v) != tuple(views):
+        raise BitstreamError(f"gain maps: bad header (kind {kind}, grid {gh}x{gw}, {ch} channels, views {u}x{v})",
                              frame)
     start = _HEADER.size
     ref = None
-    if version == VERSION_DELTA:
+    if kind == KIND_DELTA:
         if len(data) < start + _REFERENCE.size:
             raise BitstreamError("gain maps: truncated", frame)
         (ref,) = _REFERENCE.unpack_from(data, start)
         start += _REFERENCE.size
     shape = (u, v, gh, gw, ch)
     n = u * v * gh * gw * ch
-    if version == VERSION_CODED:
+    if kind == KIND_FULL:
         from lfstream.codec._entropy import OK, decode_coded_levels
 
         levels, status = decode_coded_levels(data[start:], (u * gh, v * gw * ch), 255)
@@ -195,8 +197,6 @@ def _parse(data: bytes, views: tuple[int, int], frame: int | None, refs: dict[in
         raise BitstreamError(f"gain maps: corrupt ({exc})", frame) from exc
     if len(raw) != n:
         raise BitstreamError(f"gain maps: {len(raw)} values where {n} were expected", frame)
-    if ref is None:
-        return np.frombuffer(raw, np.int8).reshape(shape).copy()
     base = refs.get(ref)
     if base is None:
         raise GainReferenceError(f"gain maps: delta to frame {ref}, which this decoder has not decoded", frame)
@@ -241,7 +241,7 @@ class GainTracker:
         sent = np.where(np.abs(q.astype(np.int16) - prev) > self.deadband, q, prev)
         u, v, gh, gw, ch = q.shape
         delta = sent.view(np.uint8) - prev.view(np.uint8)  # mod 256
-        payload = _HEADER.pack(VERSION_DELTA, gh, gw, ch, u, v) + _REFERENCE.pack(seq - 1) + _compress(delta.tobytes())
+        payload = _HEADER.pack(KIND_DELTA, gh, gw, ch, u, v) + _REFERENCE.pack(seq - 1) + _compress(delta.tobytes())
         full = _full_payload(q)
         if len(full) <= len(payload):
             # content moving through the cells can make the delta the larger (measured on a

@@ -427,13 +427,13 @@ def test_info_on_a_stream_says_what_it_carries(capsys, tmp_path):
     (tmp_path / "a.lfs").write_bytes(data)
     assert main(["info", str(tmp_path / "a.lfs"), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)["stream"]
-    assert s == {"version": 1, "centre_codec": "jpeg", "preset": "fast", "quality": 40, "depth_hint": True,
+    assert s == {"version": 4, "centre_codec": "jpeg", "preset": "fast", "quality": 40, "depth_hint": True,
                  "hint_scale": 4, "view_axes": None, "hance_map": None, "residual": None, "residual_mode": None,
                  "file_bytes": len(data),
                  "bpp": pytest.approx(8 * len(data) / (2 * 7 * 7 * 64 * 96))}
     (tmp_path / "b.lfs").write_bytes(lfstream.encode(lf, quality=40, preset="best", residual=30))
     assert main(["info", str(tmp_path / "b.lfs")]) == 0
-    assert "version 3, best (av1 centre) q40 + hint 1/4 + residual q30 (prediction)" in capsys.readouterr().out
+    assert "version 4, best (av1 centre) q40 + hint 1/4 + residual q30 (prediction)" in capsys.readouterr().out
 
 
 def test_the_stream_summary_text_says_what_was_coded():
@@ -1008,14 +1008,14 @@ def test_a_stream_of_an_input_cut_short_ends_there_with_its_outputs(capsys, tmp_
 
 
 def test_a_stream_failing_before_any_output_leaves_no_folder_it_made(capsys, tmp_path):
-    """A stage that fails before anything is written (Depth-Net asked of a stream without a
-    hint) is one line and exit 2, and the output folder this run made is removed; one the
-    user made stays."""
-    code, _, err = run(capsys, "stream", "--no-depth-hint", "--depth", "net", "--frames", "2", "-o", tmp_path / "made")
+    """A stage that fails before anything is written (the hint's disparity asked of a stream
+    without a hint) is one line and exit 2, and the output folder this run made is removed;
+    one the user made stays."""
+    code, _, err = run(capsys, "stream", "--no-depth-hint", "--depth", "hint", "--frames", "2", "-o", tmp_path / "made")
     assert code == 2 and "stage decoder failed" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "made").exists()
     (tmp_path / "mine").mkdir()
-    code, _, _ = run(capsys, "stream", "--no-depth-hint", "--depth", "net", "--frames", "2", "-o", tmp_path / "mine")
+    code, _, _ = run(capsys, "stream", "--no-depth-hint", "--depth", "hint", "--frames", "2", "-o", tmp_path / "mine")
     assert code == 2 and (tmp_path / "mine").is_dir()
 
 

@@ -9,9 +9,8 @@ from lfstream.codec.bitstream import split_stream
 from lfstream.codec.decoder import Decoder
 from lfstream.codec.encoder import Encoder
 from lfstream.codec.gains import (
-    VERSION,
-    VERSION_CODED,
-    VERSION_DELTA,
+    KIND_DELTA,
+    KIND_FULL,
     GainDecoder,
     GainReferenceError,
     GainTracker,
@@ -41,8 +40,8 @@ def test_key_maps_are_the_single_frame_payload_and_deltas_are_smaller(shaded_gai
     payloads = [tracker.encode(g, k) for k, g in enumerate(shaded_gains)]
     assert payloads[0] == encode_gains(shaded_gains[0])  # the first frame: the single-frame payload
     assert payloads[4] == encode_gains(shaded_gains[4])  # a key map every 4 frames
-    assert [p[0] for p in payloads] == [VERSION_CODED, VERSION_DELTA, VERSION_DELTA, VERSION_DELTA, VERSION_CODED,
-                                        VERSION_DELTA]
+    assert [p[0] for p in payloads] == [KIND_FULL, KIND_DELTA, KIND_DELTA, KIND_DELTA, KIND_FULL,
+                                        KIND_DELTA]
     assert max(len(p) for k, p in enumerate(payloads) if k % 4) < 0.6 * min(len(payloads[0]), len(payloads[4]))
 
 
@@ -62,10 +61,10 @@ def test_decoded_deltas_stay_within_the_dead_band(shaded_gains):
 
 def test_gaps_and_vanishing_shading_send_key_maps(shaded_gains):
     tracker = GainTracker()
-    assert tracker.encode(shaded_gains[0], 0)[0] == VERSION_CODED
-    assert tracker.encode(shaded_gains[1], 2)[0] == VERSION_CODED  # frame 1 was never encoded
+    assert tracker.encode(shaded_gains[0], 0)[0] == KIND_FULL
+    assert tracker.encode(shaded_gains[1], 2)[0] == KIND_FULL  # frame 1 was never encoded
     assert tracker.encode(None, 3) == b""  # no shading: nothing sent
-    assert tracker.encode(shaded_gains[2], 4)[0] == VERSION_CODED
+    assert tracker.encode(shaded_gains[2], 4)[0] == KIND_FULL
     with pytest.raises(LFValueError, match="key_interval"):
         GainTracker(key_interval=0)
 
@@ -98,7 +97,7 @@ def test_truncated_delta_payloads_are_bitstream_errors(shaded_gains, cut):
 def test_a_video_sends_deltas_and_a_lost_one_falls_back():
     clip = synth_clip(4, 5, (64, 96), seed=9, vignetting=0.6, motion=1.0, camera_pan=0.3).lf
     header, packets = split_stream(lfstream.encode(clip, quality=80, preset="fast"))
-    assert [p.gain[0] for p in packets] == [VERSION_CODED] + [VERSION_DELTA] * 3
+    assert [p.gain[0] for p in packets] == [KIND_FULL] + [KIND_DELTA] * 3
     dec = Decoder(header)
     full = [dec.decode_packet(p).lf for p in packets]
     assert dec.gain_fallbacks == 0
@@ -208,21 +207,24 @@ def test_the_fused_gain_samples_equal_a_per_view_numpy_reference(views, size, gr
         assert got.dtype == np.float32 and np.array_equal(got, want)
 
 
-def test_coded_key_maps_are_exact_smaller_than_zstd_and_version_1_still_decodes(shaded_gains):
-    """A key map (version 3, context coded) decodes to exactly the quantised gains; the
-    zstd payload it replaced (version 1) is larger and still decodes to the same."""
+def test_coded_key_maps_are_exact_and_smaller_than_zstd_and_older_kinds_are_refused(shaded_gains):
+    """A key map (context coded) decodes to exactly the quantised gains and is smaller than
+    zstd of the same values; a payload of a development build's kinds (1 to 3) is refused
+    with a line that names it."""
     import zstandard
 
-    from lfstream.codec.gains import _HEADER, dequantise_gains, quantise_gains
+    from lfstream.codec.gains import _HEADER, OLDER_KINDS, dequantise_gains, quantise_gains
 
     for g in shaded_gains[:3]:
         q = quantise_gains(g)
         u, v, gh, gw, ch = q.shape
-        old = _HEADER.pack(VERSION, gh, gw, ch, u, v) + zstandard.ZstdCompressor(level=19).compress(q.tobytes())
+        zstd = zstandard.ZstdCompressor(level=19).compress(q.tobytes())
         new = encode_gains(g)
-        assert new[0] == VERSION_CODED and len(new) < len(old), (len(new), len(old))
-        for payload in (new, old):
-            np.testing.assert_array_equal(GainDecoder().decode(payload, VIEWS), dequantise_gains(q))
+        assert new[0] == KIND_FULL and len(new) < _HEADER.size + len(zstd), (len(new), len(zstd))
+        np.testing.assert_array_equal(GainDecoder().decode(new, VIEWS), dequantise_gains(q))
+        for kind in OLDER_KINDS:
+            with pytest.raises(BitstreamError, match="older lfstream; re-encode"):
+                GainDecoder().decode(_HEADER.pack(kind, gh, gw, ch, u, v) + zstd, VIEWS)
 
 
 def test_damaged_coded_key_maps_fail_clearly(shaded_gains):

@@ -11,7 +11,7 @@ import pytest
 from lfstream.cli import main
 from lfstream.codec import decode, encode
 from lfstream.codec.bitstream import (
-    VERSION_RESIDUAL,
+    VERSION,
     Packet,
     StreamHeader,
     pack_header,
@@ -54,7 +54,7 @@ def test_residual_views_are_serpentine_without_the_centre():
 
 def test_residual_raises_quality_and_costs_bits(clip, coded):
     plain = encode(clip, quality=60, preset="balanced")
-    assert coded[4] == VERSION_RESIDUAL and plain[4] == 2  # a version-3 stream only with a residual
+    assert coded[4] == plain[4] == VERSION  # one format, with a residual layer or without
     out, base = decode(coded), decode(plain)
     gain = mpsnr(out[0], clip[0]) - mpsnr(base[0], clip[0])
     # measured 1.52 dB before the warp skipped the splat where it cannot matter, 1.46 dB after
@@ -100,23 +100,27 @@ def test_residual_is_added_only_to_its_reference_prediction(clip, coded):
     assert Decoder(read_header(__import__("io").BytesIO(low_q))).applies_residual
 
 
-def test_version_3_packets_round_trip_and_are_checked():
+def test_residual_packets_round_trip_and_are_checked():
     header = StreamHeader(views=(3, 3), size=(16, 16), has_hint=False, has_residual=True)
-    assert header.version == VERSION_RESIDUAL
+    assert header.version == VERSION
     packets = [Packet(seq=k, timestamp_us=k, image=b"i" * 5, residual=b"r" * (k + 1)) for k in range(3)]
     data = pack_header(header) + b"".join(pack_packet(p, header.version) for p in packets)
     back, got = split_stream(data)
     assert back == header and got == packets
-    with pytest.raises(LFValueError, match="version-3"):
-        pack_packet(packets[0], 1)  # a residual cannot go into a version-1 packet
-    # a version-2 header claiming a residual layer, and a version-3 one without it
-    for version, flags in ((2, 2), (3, 0)):
-        bad = bytearray(pack_header(StreamHeader(views=(3, 3), size=(16, 16))))
-        struct.pack_into("<HH", bad, 4, version, flags)
-        import zlib
+    with pytest.raises(LFValueError, match="format version 4"):
+        pack_packet(packets[0], 3)  # the development builds' versions are not written
+    # a residual layer in a stream whose header has none is damage
+    plain = StreamHeader(views=(3, 3), size=(16, 16))
+    with pytest.raises(BitstreamError, match="frame 0: a residual layer of 1 bytes in a stream whose header has none"):
+        split_stream(pack_header(plain) + pack_packet(packets[0]))
+    # a development build's stream (versions 1-3) is refused with one line that says so
+    import zlib
 
+    for version in (1, 2, 3):
+        bad = bytearray(pack_header(plain))
+        struct.pack_into("<H", bad, 4, version)
         bad[-4:] = struct.pack("<I", zlib.crc32(bytes(bad[:-4])))
-        with pytest.raises(BitstreamError, match="residual flag"):
+        with pytest.raises(BitstreamError, match=f"format version {version}, made by an older lfstream; re-encode it"):
             read_header(__import__("io").BytesIO(bytes(bad)))
 
 
@@ -192,7 +196,7 @@ def test_cli_encode_residual(tmp_path, clip, capsys):
     out = tmp_path / "clip.lfs"
     assert main(["encode", str(src), "-o", str(out), "--residual", "40", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["residual"] == 40 and report["residual_bpp"] > 0 and out.read_bytes()[4] == VERSION_RESIDUAL
+    assert report["residual"] == 40 and report["residual_bpp"] > 0 and out.read_bytes()[4] == VERSION
     assert main(["encode", str(src), "-o", str(tmp_path / "x.lfs"), "--residual", "40", "--bpp", "0.1"]) == 2
     assert "residual" in capsys.readouterr().err
     with pytest.raises(SystemExit) as info:  # argparse's range check: one line, status 2
@@ -212,7 +216,7 @@ def test_views_residual_carries_the_views_themselves(clip, quality, fmt_name):
     lf = clip[:1]
     data = encode(lf, quality=quality, preset="balanced", residual=60, residual_mode="views")
     header, packets = split_stream(data)
-    assert header.version == VERSION_RESIDUAL and header.meta["residual"]["mode"] == "views"
+    assert header.version == VERSION and header.meta["residual"]["mode"] == "views"
     p = packets[0]
     assert p.gain == b"" and p.residual[0] == fmt and residual_mode(p.residual) == "views"
     # prediction streams keep their header bytes: no "mode" key

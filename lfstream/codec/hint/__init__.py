@@ -25,27 +25,21 @@ optical flow from the centre view to the edge mid-point views and a rank-1 fit o
 axes. Light fields that follow the convention keep ``A = I`` (the fit must explain the flows
 far better than the convention, and change a warped pixel by a quarter of a pixel or more).
 
-Payload (version 2, little-endian)::
+Payload (format 6, little-endian)::
 
-    version u8 = 2 | kind u8 (0 full, 1 delta, 2 repeat) | scale u8 | coder u8
-    lo f32 | hi f32 | hs u16 | ws u16 | ref u32 | body
+    format u8 = 6 | kind u8 (0 full, 1 delta, 2 repeat; + 0x80: view axes follow) | scale u8
+    coder u8 (1: context coded, full maps; 0: zstd, deltas) | lo f32 | hi f32 | hs u16 | ws u16
+    ref u32 | [A: 4 f32, row-major, with the 0x80 flag] | body
 
-Version 4 (5 with the axes below) is the same layout with coder 1 (a full map, context
-coded); versions 2 and 3 carry coder 0 (zstd; the byte was reserved before).
-
-Version 3 is version 2 followed by the view axes, ``A`` as 4 f32 (row-major), before the
-body; it is written only when ``A`` is not the identity, so a stream that follows the
-convention is byte for byte what it was.
-
-``full``: the ``hs x ws`` map quantised to 8 bits over ``[lo, hi]``; with coder 1 (what
-the encoder writes) the body is the map's level step ``k`` (u8: the values are multiples
-of ``k`` and 255) and its levels, range coded with context-adaptive probabilities
-(:mod:`lfstream.codec._entropy`: median-edge prediction, five activity contexts; 12-37 %
-fewer bytes than zstd on the shared samples' hints, e.g. lytro_bikes 3195 -> 2072 B, and
-faster); with coder 0 (streams written before it) zstd of its planar prediction residual
-(``q - left - up + upleft``, mod 256). ``delta``: zstd of the difference (mod 256) to the
-quantised map of frame ``ref``, on the same grid and range; ``repeat``: frame ``ref``'s map
-unchanged (no body). Version 1 payloads (full maps only, the first release) still decode.
+The view axes are sent only when ``A`` is not the identity. ``full``: the ``hs x ws`` map
+quantised to 8 bits over ``[lo, hi]``; the body is the map's level step ``k`` (u8: the
+values are multiples of ``k`` and 255) and its levels, range coded with context-adaptive
+probabilities (:mod:`lfstream.codec._entropy`: median-edge prediction, five activity
+contexts; 12-37 % fewer bytes than zstd of the planar prediction residual on the shared
+samples' hints, e.g. lytro_bikes 3195 -> 2072 B, and faster). ``delta``: zstd of the
+difference (mod 256) to the quantised map of frame ``ref``, on the same grid and range;
+``repeat``: frame ``ref``'s map unchanged (no body). Formats 1 to 5 (development builds)
+are refused with a line that says so.
 
 Decoding: the quantised map, upsampled to full resolution by joint bilateral upsampling
 guided by the decoded centre view (edges of the depth follow edges of the picture).
@@ -116,10 +110,7 @@ from lfstream.codec.hint.options import (
     _AXES as _AXES,
 )
 from lfstream.codec.hint.options import (
-    _HEADER_V1 as _HEADER_V1,
-)
-from lfstream.codec.hint.options import (
-    _HEADER_V2 as _HEADER_V2,
+    _HEADER as _HEADER,
 )
 from lfstream.codec.hint.options import (
     _ZSTD_LEVEL as _ZSTD_LEVEL,
@@ -137,16 +128,10 @@ from lfstream.codec.hint.options import (
     is_standard,
 )
 from lfstream.codec.hint.options import (
-    HINT_VERSION as HINT_VERSION,
+    HINT_FORMAT as HINT_FORMAT,
 )
 from lfstream.codec.hint.options import (
-    HINT_VERSION_AXES as HINT_VERSION_AXES,
-)
-from lfstream.codec.hint.options import (
-    HINT_VERSION_CODED as HINT_VERSION_CODED,
-)
-from lfstream.codec.hint.options import (
-    HINT_VERSION_CODED_AXES as HINT_VERSION_CODED_AXES,
+    KIND_AXES as KIND_AXES,
 )
 from lfstream.codec.hint.options import (
     KIND_DELTA as KIND_DELTA,
@@ -182,9 +167,6 @@ from lfstream.codec.hint.payload import (
     _decoded_body as _decoded_body,
 )
 from lfstream.codec.hint.payload import (
-    _diff2d as _diff2d,
-)
-from lfstream.codec.hint.payload import (
     _expand as _expand,
 )
 from lfstream.codec.hint.payload import (
@@ -198,9 +180,6 @@ from lfstream.codec.hint.payload import (
 )
 from lfstream.codec.hint.payload import (
     _parse as _parse,
-)
-from lfstream.codec.hint.payload import (
-    _undiff2d as _undiff2d,
 )
 from lfstream.codec.hint.sweep import (
     _sent_grid as _sent_grid,

@@ -15,27 +15,22 @@ class HintReferenceError(BitstreamError):
     """A delta hint refers to a frame this decoder never received (lost in transport)."""
 
 
-_HEADER_V1 = struct.Struct("<BffHH")
-
-
-_HEADER_V2 = struct.Struct("<BBBBffHHI")
+_HEADER = struct.Struct("<BBBBffHHI")
 
 
 _AXES = struct.Struct("<4f")
 
 
-HINT_VERSION = 2
+#: The payload's format (its first byte); 1 to 5 were written by development builds and are
+#: refused with a line that says so.
+HINT_FORMAT = 6
 
 
-HINT_VERSION_AXES = 3
+OLDER_HINT_FORMATS = (1, 2, 3, 4, 5)
 
 
-# versions 2 and 3 whose fourth header byte names the body's coder (:data:`CODER_CONTEXT`):
-# readers from before the context coder refuse them by version instead of as corrupt zstd
-HINT_VERSION_CODED = 4
-
-
-HINT_VERSION_CODED_AXES = 5
+#: The kind byte's flag: the view axes follow the header.
+KIND_AXES = 0x80
 
 
 GEOMETRY_MODES = ("auto", "standard")

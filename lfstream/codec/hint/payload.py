@@ -14,18 +14,16 @@ from lfstream.codec.bitstream import decompress_bounded
 from lfstream.codec.hint.grids import HintMap, _upsample
 from lfstream.codec.hint.options import (
     _AXES,
-    _HEADER_V1,
-    _HEADER_V2,
+    _HEADER,
     CODER_CONTEXT,
     CODER_ZSTD,
-    HINT_VERSION,
-    HINT_VERSION_AXES,
-    HINT_VERSION_CODED,
-    HINT_VERSION_CODED_AXES,
+    HINT_FORMAT,
+    KIND_AXES,
     KIND_DELTA,
     KIND_FULL,
     KIND_REPEAT,
     MAX_AXIS_ENTRY,
+    OLDER_HINT_FORMATS,
     HintOptions,
     HintReferenceError,
     is_standard,
@@ -74,26 +72,10 @@ def quantise(hm: HintMap, search: tuple[float, float] | None = None, precision: 
 
 def _pack(kind: int, qh: QuantisedHint, ref: int, body: bytes, coder: int = CODER_ZSTD) -> bytes:
     hs, ws = qh.q.shape
-    coded = coder != CODER_ZSTD
-    if qh.axes is None:  # the convention: version 2 (4 with a coder), as before view axes existed
-        version = HINT_VERSION_CODED if coded else HINT_VERSION
-        return _HEADER_V2.pack(version, kind, qh.scale, coder, qh.lo, qh.hi, hs, ws, ref) + body
-    version = HINT_VERSION_CODED_AXES if coded else HINT_VERSION_AXES
-    return (_HEADER_V2.pack(version, kind, qh.scale, coder, qh.lo, qh.hi, hs, ws, ref)
+    if qh.axes is None:  # the convention: no axes in the payload
+        return _HEADER.pack(HINT_FORMAT, kind, qh.scale, coder, qh.lo, qh.hi, hs, ws, ref) + body
+    return (_HEADER.pack(HINT_FORMAT, kind | KIND_AXES, qh.scale, coder, qh.lo, qh.hi, hs, ws, ref)
             + _AXES.pack(*np.asarray(qh.axes, np.float32).ravel().tolist()) + body)
-
-
-def _diff2d(q: np.ndarray) -> np.ndarray:
-    """The planar prediction residual ``q - (left + up - upleft)`` mod 256: disparity is
-    piecewise smooth, so the residual is mostly near zero (measured: zstd then needs 31 to
-    44 % fewer bytes on the real samples)."""
-    d = np.diff(q.astype(np.int16), axis=1, prepend=0)
-    return np.diff(d, axis=0, prepend=0).astype(np.uint8)
-
-
-def _undiff2d(r: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`_diff2d`: the 2-D running sum mod 256 (exact)."""
-    return (np.cumsum(np.cumsum(r.astype(np.int64), axis=0), axis=1) % 256).astype(np.uint8)
 
 
 def _level_step_of(q: np.ndarray) -> int:
@@ -191,36 +173,33 @@ def _parse(data: bytes, size: tuple[int, int], frame: int | None, refs: dict[int
         raise BitstreamError("depth hint: truncated", frame)
     version = data[0]
     axes = None
-    if version == 1:
-        if len(data) < _HEADER_V1.size:
-            raise BitstreamError("depth hint: truncated", frame)
-        _, lo, hi, hs, ws = _HEADER_V1.unpack_from(data)
-        kind, scale, ref, body, coder = KIND_FULL, None, 0, data[_HEADER_V1.size:], CODER_ZSTD
-    elif version in (HINT_VERSION, HINT_VERSION_AXES, HINT_VERSION_CODED, HINT_VERSION_CODED_AXES):
-        with_axes = version in (HINT_VERSION_AXES, HINT_VERSION_CODED_AXES)
-        head = _HEADER_V2.size + (_AXES.size if with_axes else 0)
-        if len(data) < head:
-            raise BitstreamError("depth hint: truncated", frame)
-        _, kind, scale, coder, lo, hi, hs, ws, ref = _HEADER_V2.unpack_from(data)
-        body = data[head:]
-        if kind not in (KIND_FULL, KIND_DELTA, KIND_REPEAT) or scale < 1:
-            raise BitstreamError(f"depth hint: unknown kind {kind} or scale {scale}", frame)
-        if version in (HINT_VERSION, HINT_VERSION_AXES):
-            coder = CODER_ZSTD  # the byte was reserved (written as 0) before coders existed
-        elif coder != CODER_CONTEXT or kind != KIND_FULL:
-            raise BitstreamError(f"depth hint: unknown coder {coder} for a kind {kind} map", frame)
-        if with_axes:
-            axes = np.asarray(_AXES.unpack_from(data, _HEADER_V2.size), np.float32).reshape(2, 2)
-            if not (np.all(np.isfinite(axes)) and np.abs(axes).max() <= MAX_AXIS_ENTRY):
-                raise BitstreamError(f"depth hint: bad view axes {axes.ravel().tolist()}", frame)
-    else:
-        raise BitstreamError(f"depth hint: unknown version {version}", frame)
+    if version in OLDER_HINT_FORMATS:
+        raise BitstreamError(f"depth hint: payload format {version}, made by an older lfstream; re-encode the "
+                             "stream", frame)
+    if version != HINT_FORMAT:
+        raise BitstreamError(f"depth hint: unknown payload format {version}", frame)
+    if len(data) < _HEADER.size:
+        raise BitstreamError("depth hint: truncated", frame)
+    _, kind, scale, coder, lo, hi, hs, ws, ref = _HEADER.unpack_from(data)
+    with_axes = bool(kind & KIND_AXES)
+    kind &= ~KIND_AXES
+    head = _HEADER.size + (_AXES.size if with_axes else 0)
+    if len(data) < head:
+        raise BitstreamError("depth hint: truncated", frame)
+    body = data[head:]
+    if kind not in (KIND_FULL, KIND_DELTA, KIND_REPEAT) or scale < 1:
+        raise BitstreamError(f"depth hint: unknown kind {kind} or scale {scale}", frame)
+    # a full map is context coded; a delta (and a repeat, which has no body) is zstd
+    if coder != (CODER_CONTEXT if kind == KIND_FULL else CODER_ZSTD):
+        raise BitstreamError(f"depth hint: unknown coder {coder} for a kind {kind} map", frame)
+    if with_axes:
+        axes = np.asarray(_AXES.unpack_from(data, _HEADER.size), np.float32).reshape(2, 2)
+        if not (np.all(np.isfinite(axes)) and np.abs(axes).max() <= MAX_AXIS_ENTRY):
+            raise BitstreamError(f"depth hint: bad view axes {axes.ravel().tolist()}", frame)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi and abs(lo) < 1e4 and abs(hi) < 1e4):
         raise BitstreamError(f"depth hint: bad range {lo}..{hi}", frame)
     if not (1 <= hs <= h and 1 <= ws <= w):
         raise BitstreamError(f"depth hint: map size {hs}x{ws} does not fit the view size {h}x{w}", frame)
-    if scale is None:  # version 1: the map spans the view
-        scale = max(1, int(round(h / hs)))
     base = None
     if kind != KIND_FULL:
         base = refs.get(ref)
@@ -237,10 +216,7 @@ def _parse(data: bytes, size: tuple[int, int], frame: int | None, refs: dict[int
     if len(raw) != hs * ws:
         raise BitstreamError(f"depth hint: {len(raw)} values where {hs * ws} were expected", frame)
     q = np.frombuffer(raw, np.uint8).reshape(hs, ws)
-    if base is not None:
-        q = (base.q.astype(np.int16) + q).astype(np.uint8)
-    elif version != 1:  # a full map of version 2 or 3: the planar prediction residual
-        q = _undiff2d(q)
+    q = (base.q.astype(np.int16) + q).astype(np.uint8)
     return QuantisedHint(q.copy(), float(lo), float(hi), int(scale), axes)
 
 

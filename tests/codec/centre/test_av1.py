@@ -1,5 +1,5 @@
 """The centre view's coding: JPEG and AV1 key frames, the presets that pick them, and the
-version-2 streams that carry AV1."""
+streams that carry them."""
 
 import json
 
@@ -11,6 +11,7 @@ from lfstream.cli import main
 from lfstream.codec.bitstream import (
     CODEC_AV1,
     CODEC_JPEG,
+    VERSION,
     StreamHeader,
     pack_header,
     read_header,
@@ -99,15 +100,15 @@ def test_damaged_av1_payload_is_a_bitstream_error(scene):
         decode_av1(data, (scene.shape[2] - 10, scene.shape[3]))
 
 
-def test_presets_stamp_the_lowest_version_and_decode(scene):
-    fast = lfstream.encode(scene, preset="fast")  # the seed's JPEG, version 1
-    assert fast[4:6] == (1).to_bytes(2, "little")
+def test_presets_code_their_centre_views_in_the_one_format_and_decode(scene):
+    fast = lfstream.encode(scene, preset="fast")  # the seed's JPEG
+    assert fast[4:6] == VERSION.to_bytes(2, "little") and split_stream(fast)[0].codec == CODEC_JPEG
     # the default on a 5x5 grid codes the centre as AV1 (rate.DEFAULT_PRESET_BY_VIEWS)
     assert lfstream.encode(scene) == lfstream.encode(scene, preset="balanced")
     for name in ("balanced", "best"):
         data = lfstream.encode(scene, preset=name)
         header, packets = split_stream(data)
-        assert header.version == 2 and header.codec == CODEC_AV1 and header.meta["preset"] == name
+        assert header.version == VERSION and header.codec == CODEC_AV1 and header.meta["preset"] == name
         assert header.meta["centre"]["svt_preset"] == PRESETS[name].speed
         rec = lfstream.decode(data)[0]
         assert rec.shape == scene.shape
@@ -115,21 +116,19 @@ def test_presets_stamp_the_lowest_version_and_decode(scene):
         assert data == lfstream.encode(scene, preset=name)  # deterministic
 
 
-def test_a_version_1_header_cannot_claim_av1_and_unknown_codecs_are_refused():
-    v2 = pack_header(StreamHeader(views=(3, 3), size=(16, 16), codec=CODEC_AV1))
-    assert read_header(__import__("io").BytesIO(v2)).codec == CODEC_AV1
-    forged = bytearray(v2)
-    forged[4:6] = (1).to_bytes(2, "little")  # a version-1 stamp on an AV1 stream (CRC fixed below)
+def test_unknown_codecs_are_refused():
+    av1 = pack_header(StreamHeader(views=(3, 3), size=(16, 16), codec=CODEC_AV1))
+    assert read_header(__import__("io").BytesIO(av1)).codec == CODEC_AV1
+    forged = bytearray(av1)
+    forged[18] = 9  # the codec byte (CRC fixed below)
     import struct
     import zlib
 
-    body = bytes(forged[:-4])
-    forged[-4:] = struct.pack("<I", zlib.crc32(body))
-    with pytest.raises(BitstreamError, match="not part of version 1"):
+    forged[-4:] = struct.pack("<I", zlib.crc32(bytes(forged[:-4])))
+    with pytest.raises(BitstreamError, match="unknown codec id 9"):
         read_header(__import__("io").BytesIO(bytes(forged)))
     with pytest.raises(BitstreamError, match="unknown codec"):
         pack_header(StreamHeader(views=(3, 3), size=(16, 16), codec=9))
-    assert StreamHeader(views=(3, 3), size=(16, 16), codec=CODEC_JPEG).version == 1
 
 
 def test_av1_centre_gives_equal_quality_for_fewer_bytes(scene):

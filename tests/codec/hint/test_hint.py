@@ -264,12 +264,11 @@ def test_the_working_sweeps_candidates_are_at_least_min_spacing_apart(monkeypatc
     np.testing.assert_allclose(np.diff(seen[0]) * work, opts.step * work / reach, rtol=1e-5)
 
 
-def test_version_1_payloads_still_decode():
+def test_a_development_builds_version_1_payload_is_refused_with_one_line():
     q = np.arange(6 * 8, dtype=np.uint8).reshape(6, 8) * 5
     v1 = struct.pack("<BffHH", 1, -1.0, 2.0, 6, 8) + zstandard.ZstdCompressor(level=19).compress(q.tobytes())
-    d = H.decode_hint(v1, (24, 32))
-    assert d.shape == (24, 32) and d.min() >= -1.0 and d.max() <= 2.0
-    assert d[0, 0] == pytest.approx(-1.0, abs=1e-6)
+    with pytest.raises(BitstreamError, match="payload format 1, made by an older lfstream; re-encode"):
+        H.decode_hint(v1, (24, 32))
 
 
 def test_static_video_hints_cost_a_few_bytes_and_decode_like_full_ones():
@@ -336,7 +335,7 @@ def test_a_light_field_that_follows_the_convention_keeps_the_identity(square_sce
     axes = H.estimate_view_axes(square_scene)
     assert H.is_standard(axes)
     payload = H.encode_hint(H.estimate_hint_map(square_scene))
-    assert payload[0] == H.HINT_VERSION_CODED  # the layout of version 2: no view axes
+    assert payload[0] == H.HINT_FORMAT and not payload[1] & H.KIND_AXES  # no view axes sent
 
 
 def test_flipped_view_rows_are_detected_sent_and_warped(square_scene):
@@ -349,7 +348,7 @@ def test_flipped_view_rows_are_detected_sent_and_warped(square_scene):
     assert np.abs(axes - np.diag([-1.0, 1.0])).max() < 0.06
     hm = H.estimate_hint_map(flipped)
     payload = H.encode_hint(hm)
-    assert payload[0] == H.HINT_VERSION_CODED_AXES
+    assert payload[0] == H.HINT_FORMAT and payload[1] & H.KIND_AXES
     qh = H.HintDecoder().parse(payload, (256, 256), frame=0)
     assert np.array_equal(qh.axes, hm.axes)
     # decoded quality: measured 28.06 dB with the axes, 23.90 without, 28.18 unflipped
@@ -420,9 +419,9 @@ def test_a_video_keeps_its_view_axes_in_delta_and_repeat_hints():
     payloads = [tracker.encode(f, k) for k, f in enumerate(frames)]
     dec = H.HintDecoder()
     got = [dec.decode_with_axes(p, (128, 192), frame=k)[1] for k, p in enumerate(payloads)]
-    assert payloads[0][0] == H.HINT_VERSION_CODED_AXES  # a key map, context coded
-    assert all(p[0] in (H.HINT_VERSION_AXES, H.HINT_VERSION_CODED_AXES) for p in payloads)
-    assert payloads[1][1] in (H.KIND_DELTA, H.KIND_REPEAT)
+    assert payloads[0][1] == H.KIND_FULL | H.KIND_AXES and payloads[0][3] == H.CODER_CONTEXT  # a coded key map
+    assert all(p[0] == H.HINT_FORMAT and p[1] & H.KIND_AXES for p in payloads)
+    assert payloads[1][1] & ~H.KIND_AXES in (H.KIND_DELTA, H.KIND_REPEAT)
     assert all(np.array_equal(a, got[0]) for a in got) and got[0][0, 0] < 0
 
 
@@ -430,11 +429,11 @@ def test_a_video_keeps_its_view_axes_in_delta_and_repeat_hints():
 def test_bad_view_axes_in_a_payload_are_bitstream_errors(bad):
     hm = H.HintMap(np.zeros((4, 4), np.float32), 4, (0.0, 1.0), np.float32([[-1, 0], [0, 1]]))
     payload = bytearray(H.encode_hint(hm))
-    struct.pack_into("<f", payload, H._HEADER_V2.size, bad)
+    struct.pack_into("<f", payload, H._HEADER.size, bad)
     with pytest.raises(BitstreamError, match="frame 3"):
         H.decode_hint(bytes(payload), (16, 16), frame=3)
     with pytest.raises(BitstreamError, match="truncated"):
-        H.decode_hint(bytes(payload[:H._HEADER_V2.size + 7]), (16, 16), frame=3)
+        H.decode_hint(bytes(payload[:H._HEADER.size + 7]), (16, 16), frame=3)
 
 
 def test_the_axes_fits_kernels_agree_with_numpy(rng):
@@ -499,11 +498,11 @@ def test_the_camera_array_sample_is_warped_along_its_own_axes():
     assert mpsnr(lf, lfstream.decode(lfstream.encode(lf))[0]) > 16.5
 
 
-def test_damaged_version_3_payloads_decode_finite_or_fail_clearly():
+def test_damaged_payloads_with_view_axes_decode_finite_or_fail_clearly():
     hm = H.HintMap(np.linspace(-2, 3, 64, dtype=np.float32).reshape(8, 8), 4, (-2.0, 3.0),
                    np.float32([[-1.07, -0.06], [-0.05, 1]]))
     payload = H.encode_hint(hm)
-    assert payload[0] == H.HINT_VERSION_CODED_AXES
+    assert payload[0] == H.HINT_FORMAT and payload[1] & H.KIND_AXES
     rng = np.random.default_rng(11)
     for _ in range(300):
         bad = bytearray(payload)
@@ -521,12 +520,15 @@ def test_a_payload_declaring_a_huge_size_is_refused_before_allocating():
     # python-zstandard allocates the content size a frame declares, whatever max_output_size
     # says: a hint for an 8x8 map whose body declares 1 MiB must fail without decoding it
     hm = H.HintMap(np.zeros((8, 8), np.float32), 4, (0.0, 1.0))
-    head = bytearray(H.encode_hint(hm)[:H._HEADER_V2.size])
-    head[0], head[3] = H.HINT_VERSION, H.CODER_ZSTD  # a zstd body (streams before the context coder)
-    head = bytes(head)
+    key = H.encode_hint(hm)
+    dec = H.HintDecoder()
+    dec.decode(key, (32, 32), frame=0)
+    head = bytearray(key[:H._HEADER.size])
+    head[1], head[3] = H.KIND_DELTA, H.CODER_ZSTD  # a delta to frame 0: a zstd body
+    struct.pack_into("<I", head, H._HEADER.size - 4, 0)
     body = zstandard.ZstdCompressor(level=9).compress(bytes(1 << 20))
     with pytest.raises(BitstreamError, match="declares 1048576 bytes"):
-        H.decode_hint(head + body, (32, 32), frame=2)
+        dec.decode(bytes(head) + body, (32, 32), frame=1)
 
 
 def test_the_coarse_map_is_the_sweep_at_twice_the_scale():
@@ -552,12 +554,6 @@ def test_the_coarse_map_is_the_sweep_at_twice_the_scale():
         tracker.coarsen()
 
 
-def _zstd_payload(qh: H.QuantisedHint) -> bytes:
-    """A full payload as streams before the context coder carried it (coder 0)."""
-    return H._pack(H.KIND_FULL, qh, 0, zstandard.ZstdCompressor(level=9).compress(H._diff2d(qh.q).tobytes()),
-                   H.CODER_ZSTD)
-
-
 @pytest.mark.parametrize("k", [1, 2, 3, 5, 6, 9, 64, 255])
 def test_context_coded_maps_round_trip_exactly_at_every_level_step(rng, k):
     """Any map on a grid of step k (multiples of k, and 255), smooth or random, decodes to
@@ -571,26 +567,31 @@ def test_context_coded_maps_round_trip_exactly_at_every_level_step(rng, k):
             q = np.where(rng.random(q.shape) < 0.05, 255, q)  # the quantiser's top value
         qh = H.QuantisedHint(q.astype(np.uint8), -1.0, 2.0, 4, None)
         payload = H.key_payload(qh)
-        assert payload[3] == H.CODER_CONTEXT and payload[0] == H.HINT_VERSION_CODED
+        assert payload[3] == H.CODER_CONTEXT and payload[0] == H.HINT_FORMAT
         back = H._parse(payload, (4 * q.shape[0], 4 * q.shape[1]), 0, {})
         assert np.array_equal(back.q, qh.q) and (back.lo, back.hi, back.scale) == (-1.0, 2.0, 4)
         if i == 0:  # consecutive levels: the step sent is k itself (fewer levels to code)
-            assert payload[H._HEADER_V2.size] == k
+            assert payload[H._HEADER.size] == k
 
 
-def test_context_coder_beats_zstd_and_zstd_payloads_still_decode(rng):
+def test_context_coder_beats_zstd_and_older_formats_are_refused(rng):
     """On a piecewise-smooth disparity map (what the sweep produces) the context coder needs
-    fewer bytes than the zstd body it replaced (measured on the shared samples' hints: 12-37 %
-    fewer); a coder-0 payload of the same map decodes to the same map."""
+    fewer bytes than zstd of the map's planar prediction residual (measured on the shared
+    samples' hints: 12-37 % fewer); a payload of a development build's formats (1 to 5) is
+    refused with a line that names it."""
     y, x = np.mgrid[0:90, 0:130]
     d = 0.01 * x - 0.005 * y + np.where((x - 60) ** 2 + (y - 40) ** 2 < 600, 0.8, 0.0)
     d = (d + rng.normal(0, 0.01, d.shape)).astype(np.float32)
     hm = H.HintMap(d, 4, (float(d.min()), float(d.max())), reach=3.0)
     qh = H.quantise(hm, precision=0.05)
-    coded, old = H.key_payload(qh), _zstd_payload(qh)
-    assert len(coded) < 0.85 * len(old), (len(coded), len(old))
-    for payload in (coded, old):
-        assert np.array_equal(H._parse(payload, (360, 520), 0, {}).q, qh.q)
+    planar = np.diff(np.diff(qh.q.astype(np.int16), axis=1, prepend=0), axis=0, prepend=0).astype(np.uint8)
+    zstd = zstandard.ZstdCompressor(level=9).compress(planar.tobytes())
+    coded = H.key_payload(qh)
+    assert len(coded) < 0.85 * (H._HEADER.size + len(zstd)), (len(coded), len(zstd))
+    assert np.array_equal(H._parse(coded, (360, 520), 0, {}).q, qh.q)
+    for old in range(1, H.HINT_FORMAT):
+        with pytest.raises(BitstreamError, match="frame 4: depth hint: payload format .* older lfstream"):
+            H._parse(bytes([old]) + coded[1:], (360, 520), 4, {})
 
 
 def test_corrupt_or_truncated_context_coded_maps_are_bitstream_errors(rng):
@@ -598,7 +599,7 @@ def test_corrupt_or_truncated_context_coded_maps_are_bitstream_errors(rng):
     the frame, or decodes to some map of the right shape on the grid: never another exception."""
     q = (np.clip(np.cumsum(rng.integers(-2, 3, (31, 41)), axis=1) + 20, 0, 42) * 6).astype(np.uint8)
     payload = H.key_payload(H.QuantisedHint(q, 0.0, 1.0, 4, None))
-    head = H._HEADER_V2.size
+    head = H._HEADER.size
     refused = 0
     for cut in range(head, len(payload)):  # every truncation of the body
         with pytest.raises(BitstreamError, match="frame 7: depth hint"):
@@ -621,10 +622,6 @@ def test_corrupt_or_truncated_context_coded_maps_are_bitstream_errors(rng):
         bad[1], bad[3] = kind, coder
         with pytest.raises(BitstreamError, match="unknown coder"):
             H._parse(bytes(bad), (124, 164), 7, {})
-    # versions 2 and 3 are zstd whatever their reserved byte says (it was always 0)
-    old = bytearray(_zstd_payload(H.QuantisedHint(q, 0.0, 1.0, 4, None)))
-    assert old[0] == H.HINT_VERSION and old[3] == H.CODER_ZSTD
-    assert np.array_equal(H._parse(bytes(old), (124, 164), 7, {}).q, q)
 
 
 def test_a_map_past_the_swept_range_still_gets_a_grid_that_covers_it():
