@@ -28,6 +28,8 @@ SHARED = ROOT.parent / "shared" / "data"
 #: folder (under :data:`SHARED`) that holds its light field.
 SHARED_SCENES = {"seahorse": "seahorse5x5/camImagesFlat", "dino": "hci_star/dino", "cotton": "hci_star/cotton",
                  "lytro_bikes": "lytro_bikes", "lytro_translucent": "lytro_translucent", "toys_array": "toys_array"}
+#: Shared scenes that networks may train on beside SHARED_SCENES and no benchmark measures.
+TRAINING_SCENES = {"greek": "hci_star/greek", "kitchen": "hci_star/kitchen", "rosemary": "hci_star/rosemary"}
 
 
 #: The instruction-set extensions a ratio can depend on (numba, OpenCV, the codecs pick

@@ -8,13 +8,21 @@ non-learned alternatives, with CPU time (and GPU time with --device cuda).
   against ``"off"``, and with the encoder's strength map (``hance_map=True``).
 - Depth-Net: decoded-LF MPSNR/MSSIM with the hint refiner (``depth="net"``) against the bare
   hint, at the default hint resolution and at the coarser one it could buy bits with.
+- The seed's pipeline (``--seed``): a JPEG q50 centre view alone, decoded with JPEG-Hance and
+  the seed's Depth-Net (``depth="net"`` on a stream without a hint: the disparity from the
+  restored centre view, :mod:`lfstream.models.centre_depth`) and flat; lfstream's default
+  (centre view and hint); x265 medium and SVT-AV1 preset 4 searched to the seed stream's size:
+  bpp, MPSNR, MSSIM, encode and decode time on every shared sample (the scenes as
+  ``bench/rd.py`` reads them).
 - RefNet: PSNR/SSIM against shift-and-sum on held-out synthetic LFs and the time per
   7x7x375x540 LF of RefNet, SaS and Fourier slice refocusing.
 - The networks' ELU at inference (:func:`lfstream.models.layers.elu_`, the CPU kernels)
   against PyTorch's ``elu_`` on the same tensor in the same run (24 x 375 x 540, float32
   and bfloat16; CPU runs only), with their largest difference.
 
-    python bench/networks.py [--json [FILE]] [--runs N] [--quick] [--device cuda]
+    python bench/networks.py [--json [FILE]] [--runs N] [--quick] [--device cuda] [--seed]
+
+``--seed`` runs the seed comparison alone.
 """
 
 from __future__ import annotations
@@ -200,6 +208,54 @@ def bench_depth(device: str, runs: int, quick: bool) -> list[dict]:
     return rows
 
 
+def _decode_with(data: bytes, depth: str, hance: str, device: str) -> np.ndarray:
+    return decode(data, depth=depth, hance=hance, device=device)
+
+
+def bench_seed(device: str, runs: int, quick: bool) -> list[dict]:
+    """The seed's pipeline against lfstream's default and the anchors at the seed stream's
+    size (see the module docstring). Times: the median of ``runs`` calls after one warm-up."""
+    from rd import scenes
+
+    from lfstream.codec.baseline import decode_views, encode_at_bpp, encode_views
+    from lfstream.metrics import bpp
+
+    rows = []
+    for name, lf in scenes(quick, None):
+        if name == "synthetic":
+            continue
+        lf = np.ascontiguousarray(lf)
+
+        def add(method: str, data: bytes, rec: np.ndarray, enc: dict, dec: dict) -> None:
+            rows.append({"bench": "seed", "lf": name, "method": method, "bpp": round(bpp(len(data), lf.shape), 5),
+                         "mpsnr": round(capped(mpsnr(lf, rec)), 3), "mssim": round(float(mssim(lf, rec)), 4),
+                         "encode_ms": round(enc["median_s"] * 1e3, 1), "decode_ms": round(dec["median_s"] * 1e3, 1)})
+            print(f"seed table {name:18s} {method:34s} {rows[-1]['bpp']:.4f} bpp  {rows[-1]['mpsnr']:6.2f} dB  "
+                  f"{rows[-1]['mssim']:.4f}  enc {rows[-1]['encode_ms']:7.1f} ms  dec {rows[-1]['decode_ms']:7.1f} ms")
+
+        def seed_encode() -> bytes:
+            return lfstream.encode(lf, quality=50, depth_hint=False, preset="fast")
+
+        seed = seed_encode()
+        enc = timeit(seed_encode, runs=runs)
+        for method, depth in (("seed: JPEG q50 + Depth-Net", "net"), ("seed's stream, flat", "flat")):
+            add(method + " (JPEG-Hance on)", seed, _decode_with(seed, depth, "on", device), enc,
+                timeit(lambda depth=depth: _decode_with(seed, depth, "on", device), runs=runs))
+        default = lfstream.encode(lf, quality=50)
+        add("lfstream default (centre + hint)", default, decode(default), timeit(lambda: lfstream.encode(lf, quality=50),
+                                                                                  runs=runs),
+            timeit(lambda: decode(default), runs=runs))
+        target = bpp(len(seed), lf.shape)
+        for codec, preset, label in (("hevc", "medium", "x265 medium"), ("av1", "4", "SVT-AV1 p4")):
+            res = encode_at_bpp(lf, codec, target, preset=preset)
+            shape = (lf.shape[:2], lf.shape[2:4])
+            add(f"{label} at the seed's size", res.data, decode_views(res.data, codec, *shape),
+                timeit(lambda res=res, codec=codec, preset=preset: encode_views(
+                    lf, codec, res.quality, constant_qp=res.constant_qp, preset=preset), runs=1, warmup=0),
+                timeit(lambda res=res, codec=codec: decode_views(res.data, codec, *shape), runs=runs))
+    return rows
+
+
 def bench_refnet(device: str, runs: int, quick: bool) -> list[dict]:
     rows = []
     if manifest_entry("refnet", "fast") is None:
@@ -275,8 +331,11 @@ def bench_elu(runs: int, quick: bool) -> list[dict]:
 def main(argv=None) -> dict:
     p = parser(__doc__)
     p.add_argument("--device", default="cpu")
+    p.add_argument("--seed", action="store_true", help="the seed comparison alone")
     args = p.parse_args(argv)
     runs = 1 if args.quick else args.runs
+    if args.seed:
+        return emit(args, bench_seed(args.device, runs, args.quick))
     results = bench_elu(runs, args.quick) if args.device == "cpu" else []
     results += bench_hance(args.device, runs, args.quick) + bench_depth(args.device, runs, args.quick)
     results += bench_refnet(args.device, runs, args.quick)

@@ -175,6 +175,33 @@ def generic_table(doc: dict, columns: Sequence[str] | None = None, limit: int = 
     return "\n".join(lines) + "\n"
 
 
+def loo_table(doc: dict) -> str:
+    """The seed's Depth-Net held out scene by scene (``tools/centre_depth_loo.py``): the
+    stream without a hint decoded flat and with the network (JPEG-Hance on in both), and the
+    hint's decode of the default stream."""
+    lines = ["| held-out scene | bpp (no hint) | flat MPSNR / MSSIM | Depth-Net MPSNR / MSSIM | gain | "
+             "bpp (hint) | hint MPSNR / MSSIM |", "|---|---|---|---|---|---|---|"]
+    for r in doc["rows"]:
+        lines.append(f"| {r['scene']} | {r['bpp_seed']:.4f} | {r['mpsnr_flat']:.2f} / {r['mssim_flat']:.4f} | "
+                     f"{r['mpsnr_net']:.2f} / {r['mssim_net']:.4f} | {r['gain_db']:+.2f} dB | {r['bpp_hint']:.4f} | "
+                     f"{r['mpsnr_hint']:.2f} / {r['mssim_hint']:.4f} |")
+    steps = {r["steps"] for r in doc["rows"]}
+    lines += ["", f"JPEG q{doc['quality']}; each network trained for {', '.join(map(str, sorted(steps)))} steps on "
+              f"every other real scene; `tools/centre_depth_loo.py` on {machine(doc)}."]
+    return "\n".join(lines) + "\n"
+
+
+def seed_table(doc: dict) -> str:
+    """``bench/networks.py --seed``: the seed's pipeline against lfstream's default and the
+    anchors at the seed stream's size."""
+    lines = ["| scene | method | bpp | MPSNR | MSSIM | encode ms | decode ms |", "|---|---|---|---|---|---|---|"]
+    for r in doc["results"]:
+        lines.append(f"| {r['lf']} | {r['method']} | {r['bpp']:.4f} | {r['mpsnr']:.2f} | {r['mssim']:.4f} | "
+                     f"{r['encode_ms']:.0f} | {r['decode_ms']:.0f} |")
+    lines += ["", f"`bench/networks.py --seed` on {machine(doc)}."]
+    return "\n".join(lines) + "\n"
+
+
 def zoo_table(manifest: dict | None = None) -> str:
     """The model zoo from the weights manifest: name, preset, parameters, SHA-256 and the
     reference metrics it records."""
@@ -191,6 +218,12 @@ def zoo_table(manifest: dict | None = None) -> str:
             held = {k: v for k, v in dec.items() if "train" not in k}
             bits.append("held-out hint→net " + ", ".join(
                 f"{k} {v['net_1/4'] - v['hint_1/4']:+.3f} dB" for k, v in held.items() if "net_1/4" in v))
+        loo = ref.get("loo_mpsnr_gain_db_vs_flat")
+        if loo:
+            bits.append("held-out (leave-one-out) vs flat " + ", ".join(f"{k} {v:+.2f} dB" for k, v in loo.items()))
+        seen = ref.get("trained_on_mpsnr_gain_db_vs_flat")
+        if seen:
+            bits.append("trained-on scenes vs flat " + ", ".join(f"{k} {v:+.2f} dB" for k, v in seen.items()))
         sas = ref.get("synthetic_psnr_vs_sas_db_heldout6")
         if sas:
             bits.append(f"vs shift-and-sum {min(sas):.1f}–{max(sas):.1f} dB PSNR (held-out synthetic)")
@@ -241,7 +274,7 @@ def bench_sections() -> str:
     and results."""
     out = []
     for path in sorted(RESULTS.glob("*.json")):
-        if path.stem in ("codec", "rate", "rd"):  # their own tables
+        if path.stem in ("codec", "rate", "rd", "centre_depth_loo", "networks_seed"):  # their own tables
             continue
         doc = json.loads(path.read_text())
         out += [f"### `bench/{path.stem}.py`", "", f"Measured on {machine(doc)}.", "", generic_table(doc)]
@@ -259,7 +292,9 @@ def docs_blocks() -> dict[str, str]:
     codec = load("codec")
     return {"results": results_table(codec), "speed": speed_table(codec), "zoo": zoo_table(), "rate": rate_table(load("rate")),
             "bd": bd_table(load("rd")) if (RESULTS / "rd.json").exists() else "",
-            "cli": cli_reference(), "bench": bench_sections(), "machine": f"Measured on {machine(codec)}.\n"}
+            "cli": cli_reference(), "bench": bench_sections(), "machine": f"Measured on {machine(codec)}.\n",
+            "loo": loo_table(load("centre_depth_loo")) if (RESULTS / "centre_depth_loo.json").exists() else "",
+            "seed": seed_table(load("networks_seed")) if (RESULTS / "networks_seed.json").exists() else ""}
 
 
 def render(text: str, made: dict[str, str]) -> str:

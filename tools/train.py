@@ -54,7 +54,7 @@ for path in (ROOT, ROOT / "bench"):
     if str(path) not in sys.path:
         sys.path.insert(0, str(path))
 
-from _harness import SHARED, SHARED_SCENES  # noqa: E402  (the shared samples' one table)
+from _harness import SHARED, SHARED_SCENES, TRAINING_SCENES  # noqa: E402  (the shared samples' tables)
 
 from lfstream.codec import jpeg_roundtrip  # noqa: E402
 from lfstream.errors import LFStreamError  # noqa: E402
@@ -101,7 +101,7 @@ class Recipe:
     flips: str = "none"
 
 
-DEFAULT_STEPS = {"jpeg_hance": 3000, "depth_net": 3000, "refnet": 3000}
+DEFAULT_STEPS = {"jpeg_hance": 3000, "depth_net": 3000, "depth_centre": 1500, "refnet": 3000}
 #: Real scenes the hint refiner (Depth-Net fast) and a post-filter JPEG-Hance train on: one
 #: Lytro capture, one HCI render, the camera array; seahorse, cotton and lytro_translucent
 #: stay out: the held-out test.
@@ -125,8 +125,16 @@ HANCE_QUALITIES = (30, 40, 50, 60, 70)
 #: image term (chosen on the trained-on scenes' logged ``lf_gain_db``).
 HANCE_LF_PHASE = {"objective": "lf", "steps": 1500, "batch": 8, "lr": 5e-4, "crop": 96, "margin": 24, "views": 6,
                   "image_weight": 0.5}
-DEFAULT_BATCH = {"jpeg_hance": 32, "depth_net": 8, "refnet": 8}
-DEFAULT_CROP = {"jpeg_hance": 64, "depth_net": 96, "refnet": 128}
+DEFAULT_BATCH = {"jpeg_hance": 32, "depth_net": 8, "depth_centre": 8, "refnet": 8}
+DEFAULT_CROP = {"jpeg_hance": 64, "depth_net": 96, "depth_centre": 96, "refnet": 128}
+#: The seed's Depth-Net (``depth_centre``): the real scenes it trains on (``--scenes`` names
+#: others; a leave-one-out run drops the scene it is judged on), at the qualities the decoder
+#: meets, unsupervised (:func:`centre_depth_batch_loss`).
+CENTRE_DEPTH_SCENES = (*SHARED_SCENES, *TRAINING_SCENES)
+CENTRE_DEPTH_RECIPE = {"data": "real", "qualities": (30, 50, 70), "batch": 8, "crop": 96, "views": 6, "samples": 0,
+                       "loss": "log_mse", "flips": "dihedral"}
+#: Weight of the edge-aware smoothness term of the seed's Depth-Net's loss.
+CENTRE_DEPTH_SMOOTHNESS = 0.02
 
 
 # ---------------------------------------------------------------------------------------
@@ -284,7 +292,7 @@ def real_depth_samples(scenes: tuple[str, ...], qualities: tuple[int, ...],
 
     out = []
     for name in scenes:
-        lf, present = read_lf(SHARED / SHARED_SCENES[name], return_mask=True)
+        lf, present = read_lf(SHARED / {**SHARED_SCENES, **TRAINING_SCENES}[name], return_mask=True)
         out += [depth_sample(f"{name} q{q} 1/{scale}", lf, present, q, scale)
                 for q in qualities for scale in hint_scales]
     return out
@@ -346,6 +354,59 @@ def refiner_batch_loss(model, sample: DepthSample, recipe: Recipe, rng: np.rando
     # MSE alone: an SSIM term (11x11 Gaussian moments of every crop) tripled the step time
     mse = torch.mean((warped - target) ** 2)
     return (torch.log(mse + 1e-8) if recipe.loss == "log_mse" else mse), {}
+
+
+def centre_depth_batch_loss(model, sample: DepthSample, recipe: Recipe, rng: np.random.Generator, device
+                            ) -> tuple[torch.Tensor, dict]:
+    """The seed's Depth-Net, unsupervised: ``recipe.batch`` crops of the decoded centre view,
+    the disparity predicted from each crop alone, the whole centre view sampled at ``x + d *
+    offset`` for ``recipe.views`` random present views (the gains multiplied in) against the
+    true views: the log of the mean squared error, plus :data:`CENTRE_DEPTH_SMOOTHNESS` times
+    the disparity's gradient where the picture has none (edge-aware smoothness)."""
+    if recipe.flips != "none":
+        flip_y, flip_x = (bool(f) for f in rng.integers(0, 2, 2))
+        sample = transformed_sample(sample, flip_y, flip_x, recipe.flips == "dihedral" and bool(rng.integers(0, 2)))
+    c = recipe.crop
+    h, w = sample.hint.shape
+    ys = rng.integers(0, h - c + 1, recipe.batch)
+    xs = rng.integers(0, w - c + 1, recipe.batch)
+    centre_full = _to_tensor(sample.centre, device)[None]
+    crops = torch.stack([centre_full[0, :, y:y + c, x:x + c] for y, x in zip(ys, xs)])
+    d = model(crops)[:, 0]
+    gy, gx = pixel_grid(c, c, device, torch.float32)
+    picks = crop_views(sample, ys, xs, c, recipe.views, rng, with_centre=False)
+    sy = torch.cat([gy + int(ys[v.crop]) + d[v.crop] * v.oy for v in picks])
+    sx = torch.cat([gx + int(xs[v.crop]) + d[v.crop] * v.ox for v in picks])
+    warped = sample_bilinear(centre_full, sy[None], sx[None]).reshape(3, len(picks), c, c).transpose(0, 1)
+    warped = warped * torch.from_numpy(np.stack([v.gain for v in picks])).permute(0, 3, 1, 2).to(device)
+    target = _to_tensor(np.stack([v.target for v in picks]), device)
+    photometric = torch.log(torch.mean((warped - target) ** 2) + 1e-8)
+    grey = crops.mean(dim=1)
+    smooth = (torch.mean(torch.abs(d[:, :, 1:] - d[:, :, :-1]) * torch.exp(-10 * torch.abs(grey[:, :, 1:] - grey[:, :, :-1])))
+              + torch.mean(torch.abs(d[:, 1:] - d[:, :-1]) * torch.exp(-10 * torch.abs(grey[:, 1:] - grey[:, :-1]))))
+    return photometric + CENTRE_DEPTH_SMOOTHNESS * smooth, {"smooth": round(float(smooth.detach()), 5)}
+
+
+def train_centre_depth(recipe: Recipe, out: Path, device: str, resume: bool, checkpoint_every: int
+                       ) -> tuple[torch.nn.Module, dict]:
+    """The seed's Depth-Net (``depth_centre``) on real scenes, unsupervised: decoded frames of
+    ``recipe.scenes`` at ``recipe.qualities`` (:func:`real_depth_samples`; their hints are not
+    used), photometric loss (:func:`centre_depth_batch_loss`)."""
+    t0 = time.perf_counter()
+    samples = real_depth_samples(recipe.scenes, recipe.qualities, hint_scales=(4,))
+    print(f"{recipe.model}: {len(samples)} decoded frames of {', '.join(recipe.scenes)} "
+          f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    model = spec(recipe.model, recipe.preset).build().to(device)
+    run = Run(out, recipe, model, resume)
+    rng = np.random.default_rng(recipe.seed + run.step)
+
+    def batch_loss() -> tuple[torch.Tensor, dict]:
+        return centre_depth_batch_loss(model, samples[int(rng.integers(len(samples)))], recipe, rng, device)
+
+    t0 = time.perf_counter()
+    run_steps(run, batch_loss, checkpoint_every)
+    model.eval()
+    return finish_run(run, {}, t0, device)
 
 
 @dataclass
@@ -587,6 +648,8 @@ def train(recipe: Recipe, out: Path, device: str, resume: bool, workers: int, ch
         raise SystemExit(f"--init: only JPEG-Hance trained on real views starts from given weights, not {recipe.model}")
     if recipe.data == "real" and recipe.model == "depth_net":
         return train_depth_refiner(recipe, out, device, resume, checkpoint_every)
+    if recipe.model == "depth_centre":
+        return train_centre_depth(recipe, out, device, resume, checkpoint_every)
     if recipe.data == "real":
         return train_real_hance(recipe, out, device, resume, checkpoint_every, init)
     data, hints = render_dataset(recipe.samples, recipe.views, recipe.size, recipe.seed, workers)
@@ -747,10 +810,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenes", help="comma-separated real scenes the real-data phases train on (default: "
                    f"{','.join(HANCE_TRAIN_SCENES)}; tools/hance_strength.py leaves one out)")
     args = p.parse_args(argv)
-    unknown = [x for x in (args.scenes or "").split(",") if x and x not in SHARED_SCENES]
+    known = {**SHARED_SCENES, **TRAINING_SCENES}
+    unknown = [x for x in (args.scenes or "").split(",") if x and x not in known]
     if unknown:
-        p.error(f"--scenes: {', '.join(unknown)} not among {', '.join(SHARED_SCENES)}")
-    names = list(MODEL_NAMES) if args.model == "all" else [args.model]
+        p.error(f"--scenes: {', '.join(unknown)} not among {', '.join(known)}")
+    from lfstream.models.registry import REGISTRY
+
+    # "all": every network the preset has (the seed's Depth-Net comes in the fast size only)
+    names = [n for n in MODEL_NAMES if (n, args.preset) in REGISTRY] if args.model == "all" else [args.model]
+    if (names[0], args.preset) not in REGISTRY:
+        p.error(f"{names[0]}: no {args.preset} preset")
     if args.init and (names != ["jpeg_hance"] or not spec("jpeg_hance", args.preset).config.after_deblock):
         p.error("--init: only jpeg_hance (trained on real views) starts from given weights")
     try:
@@ -778,6 +847,8 @@ def _train_all(args: argparse.Namespace, names: list[str]) -> int:
                                    "batch": args.batch or HANCE_LF_PHASE["batch"],
                                    "lr": args.lr or HANCE_LF_PHASE["lr"]})
             phases = [image] if args.objective == "image" else [lf] if init is not None else [image, lf]
+        if name == "depth_centre":  # the seed's Depth-Net, on real scenes
+            phases = [replace(recipe, scenes=scenes or CENTRE_DEPTH_SCENES, **CENTRE_DEPTH_RECIPE)]
         if name == "depth_net" and args.preset == "fast":  # the hint refiner, on real scenes
             phases = [replace(recipe, data="real", scenes=scenes or DEPTH_TRAIN_SCENES, qualities=DEPTH_QUALITIES,
                               steps=args.steps or 3000, batch=args.batch or 8, crop=128, views=8, samples=0,

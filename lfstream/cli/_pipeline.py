@@ -30,7 +30,9 @@ def add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", help="where the networks run: cpu or cuda")
     p.add_argument("--batch", type=int_in(BATCH_RANGE), default=1, help="frames per network batch in the decoder")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto",
-                   help="per-view disparity at the decoder: auto (what the stream carries), hint, flat or net (Depth-Net)")
+                   help="per-view disparity at the decoder: auto (what the stream carries), hint, flat or net "
+                   "(Depth-Net: refines the hint; on a stream without one, the seed's path: the disparity from the "
+                   "restored centre view)")
     p.add_argument("--hance", choices=HANCE_MODES, default="auto",
                    help="JPEG-Hance on the centre view: auto (by the stream's strength maps and the device), on or off")
     p.add_argument("--networks", choices=NETWORK_PRESETS, default="fast",

@@ -18,7 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=path_arg, help="the .lfs stream to decode")
     p.add_argument("-o", "--output", type=path_arg, required=True, help=".npy (T,U,V,H,W,3), .npz, a video or a folder")
     p.add_argument("--depth", choices=DEPTH_MODES, default="auto",
-                   help="disparity source: the stream's hint, flat (zero), or Depth-Net (default: hint if present)")
+                   help="disparity source: the stream's hint, flat (zero), or Depth-Net (the hint refined; on a stream without "
+                   "a hint, the seed's path: the disparity from the restored centre view alone; default: hint if present)")
     p.add_argument("--no-occlusion", action="store_true", help="warp without occlusion-aware per-view disparity")
     p.add_argument("--no-hance", action="store_true",
                    help="deprecated, the same as --hance off (it goes in the next release)")

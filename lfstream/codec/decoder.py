@@ -98,7 +98,9 @@ class Decoder:
     Attributes:
         header: the stream's header.
         depth: ``"auto"`` (the hint where the stream has one, else flat), ``"hint"``,
-            ``"flat"`` or ``"net"`` (Depth-Net; its fast preset refines the depth hint).
+            ``"flat"`` or ``"net"`` (Depth-Net: on a stream with a hint, the fast preset
+            refines it; on one without, the seed's path, the disparity from the restored
+            centre view alone, :mod:`lfstream.models.centre_depth`).
         occlusion: occlusion-aware per-view disparity in the warp (hint mode).
         hance: ``"auto"`` (JPEG-Hance where it helps: a JPEG centre view at quality <=
             HANCE_MAX_QUALITY[preset], on a CUDA device for :data:`HANCE_AUTO_GPU_ONLY`;
@@ -116,6 +118,8 @@ class Decoder:
             has it natively, float32 elsewhere), ``"float32"`` (the same bytes on every
             machine whose float32 kernels agree) or ``"bfloat16"``
             (:func:`lfstream.models.device.inference_precision`).
+        depth_net: with ``depth="net"``, this network instead of the shipped weights (a
+            training run's checkpoint, for evaluation tools).
     """
 
     header: StreamHeader
@@ -126,6 +130,7 @@ class Decoder:
     preset: str = "fast"
     deblock: bool = True
     precision: str = "auto"
+    depth_net: object | None = None  # torch.nn.Module
 
     def __post_init__(self) -> None:
         from lfstream.models.device import check_precision  # torch-free
@@ -165,12 +170,18 @@ class Decoder:
         self._depth_net = None
         self._view_maps: np.ndarray | None = None  # Depth-Net's per-view maps, reused (_decode_batch)
         if self.depth == "net":
-            from lfstream.models.registry import load_model
+            from lfstream.models.registry import REGISTRY, load_model
 
-            self._depth_net = load_model("depth_net", self.preset, self.device)
-            if self._depth_net.config.hint and not self.header.has_hint:
-                raise LFValueError("depth='net': the shipped Depth-Net refines the encoder's depth hint and this "
-                                   "stream carries none (encode with --depth-hint, or decode with --depth flat)")
+            if self.depth_net is not None:
+                self._depth_net = self.depth_net.to(self.device).eval()
+            elif not self.header.has_hint and ("depth_centre", self.preset) in REGISTRY:
+                # the seed's path: the disparity from the restored centre view alone
+                self._depth_net = load_model("depth_centre", self.preset, self.device)
+            else:
+                self._depth_net = load_model("depth_net", self.preset, self.device)
+                if self._depth_net.config.hint and not self.header.has_hint:
+                    raise LFValueError("depth='net': the shipped Depth-Net refines the encoder's depth hint and this "
+                                       "stream carries none (encode with --depth-hint, or decode with --depth flat)")
 
     @property
     def uses_hance(self) -> bool:
@@ -440,13 +451,26 @@ class Decoder:
             centres = self.decode_centres(packets)
         hints: list[np.ndarray | None] = []
         axes: list[np.ndarray | None] = []
+        centre_net = self._depth_net is not None and not self._depth_net.config.hint
         for p, centre in zip(packets, centres):
-            use_hint = self.depth in ("hint", "net") or (self.depth == "auto" and p.hint)
+            use_hint = (self.depth == "hint" or (self.depth == "net" and not centre_net)
+                        or (self.depth == "auto" and p.hint))
             if use_hint and not p.hint:
                 raise BitstreamError("packet has no depth hint", p.seq)
             d, a = self._hint_disparity(p, centre) if use_hint else (None, None)
             hints.append(d)
             axes.append(a)
+        if centre_net and not all(self._views_only(p) for p in packets):
+            # the seed's path: each frame's disparity from its restored centre view, then the
+            # warp the hint's disparity goes through (the residual's reference is the flat
+            # prediction: not applied)
+            from lfstream.models.centre_depth import predict_centre_disparity
+
+            self.residual_skipped += sum(1 for p in packets if p.residual)
+            disparities = list(predict_centre_disparity(centres, self._depth_net, self.device, self.precision))
+            frames = self._warp_on_device(packets, centres, disparities, axes) if self.warps_on_device else None
+            return frames if frames is not None else [self._warp(p, c, d, a, None, o) for p, c, d, a, o
+                                                      in zip(packets, centres, disparities, axes, out)]
         if self._depth_net is None or all(self._views_only(p) for p in packets):
             disparities = [hint if hint is not None else np.zeros((h, w), np.float32) for hint in hints]
             frames = self._warp_on_device(packets, centres, disparities, axes) if self.warps_on_device else None

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 
@@ -108,6 +109,62 @@ def add_(y: torch.Tensor, other: torch.Tensor) -> torch.Tensor:
             and not (y.untyped_storage().data_ptr() == other.untyped_storage().data_ptr()):
         return y.add_(other)
     return y + other
+
+
+def conv_elu(cin: int, cout: int, stride: int = 1, dilation: int = 1) -> nn.Sequential:
+    """A 3x3 convolution (padding keeps the size, or halves it with ``stride`` 2) and an ELU."""
+    return nn.Sequential(nn.Conv2d(cin, cout, 3, stride=stride, padding=dilation, dilation=dilation), ELU())
+
+
+def add_unet_layers(module: nn.Module, cin: int, widths: tuple[int, int, int, int], fuse: int,
+                    deep: tuple[int, ...] = (1,)) -> None:
+    """The layers of the small U-Nets (the hint refiner, the seed's Depth-Net) as attributes
+    of ``module`` (``full``, ``down1`` .. ``down3``, ``up2``, ``up1``, ``fuse``): ``widths``
+    channels at full, 1/2, 1/4 and 1/8 resolution; at 1/8, after the strided convolution, one
+    more convolution per entry of ``deep`` (its dilation); :func:`unet_down` and
+    :func:`unet_up` run them."""
+    w0, w1, w2, w3 = widths
+    module.full = conv_elu(cin, w0)
+    module.down1 = conv_elu(w0, w1, 2)
+    module.down2 = nn.Sequential(conv_elu(w1, w2, 2), conv_elu(w2, w2))
+    module.down3 = nn.Sequential(conv_elu(w2, w3, 2), *(conv_elu(w3, w3, dilation=d) for d in deep))
+    module.up2 = conv_elu(w3 + w2, w2)
+    module.up1 = conv_elu(w2 + w1, w1)
+    module.fuse = conv_elu(w1 + w0, fuse)
+
+
+def unet_down(x: torch.Tensor, multiple: int, full: nn.Module, down1: nn.Module, down2: nn.Module,
+              down3: nn.Module) -> tuple[torch.Tensor, ...]:
+    """The down-sampling half of the small U-Nets: ``x`` padded (replicated) to a multiple of
+    ``multiple``, in channels-last layout (the centre view's own layout, lost in a cat or a pad:
+    oneDNN's convolutions of these few channels run several times faster so, outputs within
+    1e-7), through the four levels.
+
+    Shape:
+        - x: ``(B, C, H, W)``; output: ``(f0, f1, f2, f3)`` at full, 1/2, 1/4 and 1/8 of the padded size
+    """
+    h, w = x.shape[-2:]
+    ph, pw = (-h) % multiple, (-w) % multiple
+    if ph or pw:
+        x = F.pad(x, (0, pw, 0, ph), mode="replicate")
+    f0 = full(x.contiguous(memory_format=torch.channels_last))
+    f1 = down1(f0)
+    f2 = down2(f1)
+    return f0, f1, f2, down3(f2)
+
+
+def unet_up(features: tuple[torch.Tensor, ...], up2: nn.Module, up1: nn.Module, fuse: nn.Module) -> torch.Tensor:
+    """The up-sampling half of the small U-Nets (the hint refiner, the seed's Depth-Net):
+    ``features`` ``(f0, f1, f2, f3)`` at full, 1/2, 1/4 and 1/8 resolution; each level
+    bilinearly up-sampled to the next and concatenated with it.
+
+    Shape:
+        - features: ``(B, C_k, H / 2^k, W / 2^k)``; output: ``fuse``'s at ``(H, W)``
+    """
+    f0, f1, f2, f3 = features
+    y = up2(torch.cat([F.interpolate(f3, size=f2.shape[-2:], mode="bilinear", align_corners=False), f2], 1))
+    y = up1(torch.cat([F.interpolate(y, size=f1.shape[-2:], mode="bilinear", align_corners=False), f1], 1))
+    return fuse(torch.cat([F.interpolate(y, size=f0.shape[-2:], mode="bilinear", align_corners=False), f0], 1))
 
 
 def count_params(model: nn.Module) -> int:

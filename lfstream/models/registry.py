@@ -56,6 +56,7 @@ def register(spec: ModelSpec) -> None:
 
 
 def _register_builtin() -> None:
+    from lfstream.models.centre_depth import CentreDepthConfig, CentreDepthNet
     from lfstream.models.depth_net import DEPTH_PRESETS, DepthNet, DepthNetConfig, DepthRefiner, DepthRefinerConfig
     from lfstream.models.jpeg_hance import HANCE_PRESETS, HanceConfig, JPEGHance
     from lfstream.models.refnet import REFNET_PRESETS, RefNet, RefNetConfig
@@ -66,10 +67,12 @@ def _register_builtin() -> None:
     # Depth-Net: the seed's monocular network (paper) and the hint refiner (fast)
     register(ModelSpec("depth_net", "paper", DepthNet, DepthNetConfig, DEPTH_PRESETS["paper"]))
     register(ModelSpec("depth_net", "fast", DepthRefiner, DepthRefinerConfig, DepthRefinerConfig()))
+    # the seed's path at a CPU decoder's size: the centre view's disparity from the centre alone
+    register(ModelSpec("depth_centre", "fast", CentreDepthNet, CentreDepthConfig, CentreDepthConfig()))
 
 
 _register_builtin()
-MODEL_NAMES = ("jpeg_hance", "depth_net", "refnet")
+MODEL_NAMES = ("jpeg_hance", "depth_net", "depth_centre", "refnet")
 
 
 def spec(name: str, preset: str = "fast") -> ModelSpec:

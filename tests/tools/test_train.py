@@ -177,3 +177,51 @@ def test_a_phase_trains_on_the_scenes_given_at_full_strength(tmp_path):
     ckpt = torch.load(tmp_path / "jpeg_hance-fast.ckpt", weights_only=False)
     assert list(ckpt["recipe"]["scenes"]) == ["dino"]
     assert saved["config"]["strength"] == spec("jpeg_hance", "fast").config.strength
+
+
+def test_the_seed_depth_loss_rewards_the_true_disparity(sample):
+    """The seed's Depth-Net's photometric loss (the centre view warped by the predicted
+    disparity against the true views): lower for the scene's own disparity than for zero,
+    and the untrained network (zero head) scores exactly zero disparity's loss."""
+    from lfstream.models.centre_depth import CentreDepthNet
+
+    recipe = replace(RECIPE, model="depth_centre", crop=48, views=4, batch=3)
+
+    class Fixed(torch.nn.Module):
+        def __init__(self, d: np.ndarray | None) -> None:
+            super().__init__()
+            self.d = d
+
+        def forward(self, crops: torch.Tensor) -> torch.Tensor:
+            b, _, c, _ = crops.shape
+            if self.d is None:
+                return torch.zeros((b, 1, c, c))
+            return torch.from_numpy(np.ascontiguousarray(self.d)).float()[None, None].expand(b, 1, c, c)
+
+    def loss(model) -> float:
+        with torch.no_grad():
+            return float(train.centre_depth_batch_loss(model, sample, replace(recipe, flips="none"),
+                                                       np.random.default_rng(4), "cpu")[0])
+
+    zero = loss(Fixed(None))
+    assert loss(CentreDepthNet()) == pytest.approx(zero, abs=1e-6)
+    # a constant at the scene's median disparity beats zero (the sample's layers span -2 .. 2.5)
+    assert loss(Fixed(np.full((48, 48), float(np.median(sample.hint)), np.float32))) < zero - 0.1
+
+
+def test_the_seed_depth_net_trains_on_the_cpu_and_its_checkpoint_loads(tmp_path):
+    """``tools/train.py depth_centre`` (the seed's Depth-Net, reduced to a few steps): it
+    records the scenes it trained on, and the checkpoint loads as the registry's network
+    with finite predictions that moved away from the untrained zero."""
+    from lfstream.models.centre_depth import predict_centre_disparity
+    from lfstream.models.registry import load_model
+    from tests.conftest import shared
+
+    shared("lytro_bikes")  # skips without the samples
+    assert train.main(["depth_centre", "--steps", "3", "--batch", "2", "--scenes", "lytro_bikes",
+                       "--out", str(tmp_path), "--checkpoint-every", "1000"]) == 0
+    ckpt = torch.load(tmp_path / "depth_centre-fast.ckpt", weights_only=False)
+    assert list(ckpt["recipe"]["scenes"]) == ["lytro_bikes"] and ckpt["recipe"]["model"] == "depth_centre"
+    net = load_model("depth_centre", "fast", path=tmp_path / "depth_centre-fast.pt")
+    d = predict_centre_disparity(np.random.default_rng(1).integers(0, 256, (1, 40, 56, 3), dtype=np.uint8), net)
+    assert d.shape == (1, 40, 56) and np.isfinite(d).all() and np.abs(d).max() > 0
