@@ -209,7 +209,7 @@ def bench_depth(device: str, runs: int, quick: bool) -> list[dict]:
 
 
 def _decode_with(data: bytes, depth: str, hance: str, device: str) -> np.ndarray:
-    return decode(data, depth=depth, hance=hance, device=device)
+    return decode(data, depth=depth, hance=hance, device=device)[0]
 
 
 def bench_seed(device: str, runs: int, quick: bool) -> list[dict]:
@@ -242,7 +242,7 @@ def bench_seed(device: str, runs: int, quick: bool) -> list[dict]:
             add(method + " (JPEG-Hance on)", seed, _decode_with(seed, depth, "on", device), enc,
                 timeit(lambda depth=depth: _decode_with(seed, depth, "on", device), runs=runs))
         default = lfstream.encode(lf, quality=50)
-        add("lfstream default (centre + hint)", default, decode(default), timeit(lambda: lfstream.encode(lf, quality=50),
+        add("lfstream default (centre + hint)", default, decode(default)[0], timeit(lambda: lfstream.encode(lf, quality=50),
                                                                                   runs=runs),
             timeit(lambda: decode(default), runs=runs))
         target = bpp(len(seed), lf.shape)
