@@ -314,6 +314,21 @@ def transformed_sample(sample: DepthSample, flip_y: bool, flip_x: bool, transpos
                    offsets=np.ascontiguousarray(offsets))
 
 
+def random_crops(sample: DepthSample, recipe: Recipe, rng: np.random.Generator, device):
+    """``recipe.batch`` random ``recipe.crop``-pixel crops of ``sample``'s decoded centre view,
+    the sample first mirrored as ``recipe.flips`` says: ``(sample, ys, xs, centre, crops)``
+    with the whole centre view ``(1, 3, H, W)`` and the crops ``(B, 3, c, c)``."""
+    if recipe.flips != "none":
+        flip_y, flip_x = (bool(f) for f in rng.integers(0, 2, 2))
+        sample = transformed_sample(sample, flip_y, flip_x, recipe.flips == "dihedral" and bool(rng.integers(0, 2)))
+    c = recipe.crop
+    h, w = sample.hint.shape
+    ys = rng.integers(0, h - c + 1, recipe.batch)
+    xs = rng.integers(0, w - c + 1, recipe.batch)
+    centre_full = _to_tensor(sample.centre, device)[None]
+    return sample, ys, xs, centre_full, torch.stack([centre_full[0, :, y:y + c, x:x + c] for y, x in zip(ys, xs)])
+
+
 def refiner_batch_loss(model, sample: DepthSample, recipe: Recipe, rng: np.random.Generator, device,
                        zero: bool = False) -> tuple[torch.Tensor, dict]:
     """Photometric loss of the views the refined maps synthesise: ``recipe.batch`` crops of
@@ -323,15 +338,8 @@ def refiner_batch_loss(model, sample: DepthSample, recipe: Recipe, rng: np.rando
     with the corrections at zero (the hint)."""
     from lfstream.models.depth_net import view_correction
 
-    if recipe.flips != "none":
-        flip_y, flip_x = (bool(f) for f in rng.integers(0, 2, 2))
-        sample = transformed_sample(sample, flip_y, flip_x, recipe.flips == "dihedral" and bool(rng.integers(0, 2)))
+    sample, ys, xs, centre_full, crops = random_crops(sample, recipe, rng, device)
     c = recipe.crop
-    h, w = sample.hint.shape
-    ys = rng.integers(0, h - c + 1, recipe.batch)
-    xs = rng.integers(0, w - c + 1, recipe.batch)
-    centre_full = _to_tensor(sample.centre, device)[None]
-    crops = torch.stack([centre_full[0, :, y:y + c, x:x + c] for y, x in zip(ys, xs)])
     hints = torch.stack([torch.from_numpy(np.ascontiguousarray(sample.hint[y:y + c, x:x + c]))
                          for y, x in zip(ys, xs)])[:, None].to(device)
     corr = model.corrections(crops, hints)
@@ -363,15 +371,8 @@ def centre_depth_batch_loss(model, sample: DepthSample, recipe: Recipe, rng: np.
     offset`` for ``recipe.views`` random present views (the gains multiplied in) against the
     true views: the log of the mean squared error, plus :data:`CENTRE_DEPTH_SMOOTHNESS` times
     the disparity's gradient where the picture has none (edge-aware smoothness)."""
-    if recipe.flips != "none":
-        flip_y, flip_x = (bool(f) for f in rng.integers(0, 2, 2))
-        sample = transformed_sample(sample, flip_y, flip_x, recipe.flips == "dihedral" and bool(rng.integers(0, 2)))
+    sample, ys, xs, centre_full, crops = random_crops(sample, recipe, rng, device)
     c = recipe.crop
-    h, w = sample.hint.shape
-    ys = rng.integers(0, h - c + 1, recipe.batch)
-    xs = rng.integers(0, w - c + 1, recipe.batch)
-    centre_full = _to_tensor(sample.centre, device)[None]
-    crops = torch.stack([centre_full[0, :, y:y + c, x:x + c] for y, x in zip(ys, xs)])
     d = model(crops)[:, 0]
     gy, gx = pixel_grid(c, c, device, torch.float32)
     picks = crop_views(sample, ys, xs, c, recipe.views, rng, with_centre=False)
@@ -387,18 +388,24 @@ def centre_depth_batch_loss(model, sample: DepthSample, recipe: Recipe, rng: np.
     return photometric + CENTRE_DEPTH_SMOOTHNESS * smooth, {"smooth": round(float(smooth.detach()), 5)}
 
 
+def _real_depth_run(recipe: Recipe, out: Path, device: str, resume: bool, hint_scales: tuple[int, ...] = (4, 8)):
+    """What a Depth-Net run on real scenes starts from: the decoded frames
+    (:func:`real_depth_samples`), the network, its :class:`Run` and the run's generator."""
+    t0 = time.perf_counter()
+    samples = real_depth_samples(recipe.scenes, recipe.qualities, hint_scales)
+    print(f"{recipe.model}: {len(samples)} decoded frames of {', '.join(recipe.scenes)} "
+          f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    model = spec(recipe.model, recipe.preset).build().to(device)
+    run = Run(out, recipe, model, resume)
+    return samples, model, run, np.random.default_rng(recipe.seed + run.step)
+
+
 def train_centre_depth(recipe: Recipe, out: Path, device: str, resume: bool, checkpoint_every: int
                        ) -> tuple[torch.nn.Module, dict]:
     """The seed's Depth-Net (``depth_centre``) on real scenes, unsupervised: decoded frames of
     ``recipe.scenes`` at ``recipe.qualities`` (:func:`real_depth_samples`; their hints are not
     used), photometric loss (:func:`centre_depth_batch_loss`)."""
-    t0 = time.perf_counter()
-    samples = real_depth_samples(recipe.scenes, recipe.qualities, hint_scales=(4,))
-    print(f"{recipe.model}: {len(samples)} decoded frames of {', '.join(recipe.scenes)} "
-          f"({time.perf_counter() - t0:.0f} s)", flush=True)
-    model = spec(recipe.model, recipe.preset).build().to(device)
-    run = Run(out, recipe, model, resume)
-    rng = np.random.default_rng(recipe.seed + run.step)
+    samples, model, run, rng = _real_depth_run(recipe, out, device, resume, hint_scales=(4,))
 
     def batch_loss() -> tuple[torch.Tensor, dict]:
         return centre_depth_batch_loss(model, samples[int(rng.integers(len(samples)))], recipe, rng, device)
@@ -483,13 +490,7 @@ def train_depth_refiner(recipe: Recipe, out: Path, device: str, resume: bool, ch
     ``recipe.scenes`` at ``recipe.qualities`` with the hint at 1/4 and 1/8 resolution
     (:func:`real_depth_samples`), photometric loss (:func:`refiner_batch_loss`). Logged
     every 50 steps: the loss against the same batch with the corrections at zero."""
-    t0 = time.perf_counter()
-    samples = real_depth_samples(recipe.scenes, recipe.qualities)
-    print(f"{recipe.model}: {len(samples)} decoded frames of {', '.join(recipe.scenes)} "
-          f"({time.perf_counter() - t0:.0f} s)", flush=True)
-    model = spec(recipe.model, recipe.preset).build().to(device)
-    run = Run(out, recipe, model, resume)
-    rng = np.random.default_rng(recipe.seed + run.step)
+    samples, model, run, rng = _real_depth_run(recipe, out, device, resume)
 
     def batch_loss() -> tuple[torch.Tensor, dict]:
         sample = samples[int(rng.integers(len(samples)))]
