@@ -460,19 +460,17 @@ class Decoder:
             d, a = self._hint_disparity(p, centre) if use_hint else (None, None)
             hints.append(d)
             axes.append(a)
-        if centre_net and not all(self._views_only(p) for p in packets):
-            # the seed's path: each frame's disparity from its restored centre view, then the
-            # warp the hint's disparity goes through (the residual's reference is the flat
-            # prediction: not applied)
-            from lfstream.models.centre_depth import predict_centre_disparity
+        views_only = all(self._views_only(p) for p in packets)
+        if self._depth_net is None or centre_net or views_only:
+            if centre_net and not views_only:
+                # the seed's path: each frame's disparity from its restored centre view, then
+                # the warp the hint's disparity goes through (a residual's reference is the flat
+                # prediction: not applied, counted as skipped by _add_residual)
+                from lfstream.models.centre_depth import predict_centre_disparity
 
-            self.residual_skipped += sum(1 for p in packets if p.residual)
-            disparities = list(predict_centre_disparity(centres, self._depth_net, self.device, self.precision))
-            frames = self._warp_on_device(packets, centres, disparities, axes) if self.warps_on_device else None
-            return frames if frames is not None else [self._warp(p, c, d, a, None, o) for p, c, d, a, o
-                                                      in zip(packets, centres, disparities, axes, out)]
-        if self._depth_net is None or all(self._views_only(p) for p in packets):
-            disparities = [hint if hint is not None else np.zeros((h, w), np.float32) for hint in hints]
+                disparities = list(predict_centre_disparity(centres, self._depth_net, self.device, self.precision))
+            else:
+                disparities = [hint if hint is not None else np.zeros((h, w), np.float32) for hint in hints]
             frames = self._warp_on_device(packets, centres, disparities, axes) if self.warps_on_device else None
             if frames is None:
                 frames = [self._warp(p, centre, d, a, r if r is not None and self._long_residual(p) else None, o)

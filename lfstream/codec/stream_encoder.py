@@ -200,16 +200,15 @@ class StreamEncoder:
                                   self.options.bpp, int(np.prod(frame.shape[:4])))
 
     def coding(self) -> dict:
-        """What the stream's encoder codes: preset, quality, hint (and its resolution divisor,
-        ``hint_scale``), residual layer, strength maps, and the default's check of its
-        prediction (``prediction_db``)."""
-        enc = self.encoder
-        if enc is None:
-            return {}
+        """What the stream's encoder codes (before the first frame: what the options name):
+        preset, quality, hint (and its resolution divisor, ``hint_scale``), residual layer,
+        strength maps, and the default's check of its prediction (``prediction_db``, dB)."""
+        enc = self.encoder if self.encoder is not None else self.named_encoder()
+        db = self.prediction_db
         return {"preset": enc.preset, "quality": int(enc.quality), "depth_hint": bool(enc.depth_hint),
                 "hint_scale": int(enc.hint_options.hint_scale) if enc.depth_hint else None,
                 "residual": enc.residual, "residual_mode": enc.residual_mode if enc.residual is not None else None,
-                "hance_map": bool(enc.hance_map), "prediction_db": self.prediction_db}
+                "hance_map": bool(enc.hance_map), "prediction_db": None if db is None else round(float(db), 3)}
 
 
 def encode_file(frames: Iterable[np.ndarray], path: str | os.PathLike, stream: StreamEncoder) -> EncodeStats:

@@ -67,9 +67,15 @@ STAGE_NAMES = ("producer", "encoder", "decoder", "refocus", "sink", "metrics")
 STOP_GRACE_S = 10.0
 
 
-def _run_then_set(run: Callable[[], None], done: threading.Event) -> None:
+def _run_then_set(run: Callable[[], object], done: threading.Event, quiet: bool = False) -> None:
+    """Runs ``run`` and then sets ``done``, whatever happens. ``quiet``: a failure is left to the
+    stream (the source's preparation, the kernels' warm-up: the source then does the work as it
+    goes, or it fails again in its stage, which names it with the stage and frame)."""
     try:
         run()
+    except Exception:
+        if not quiet:
+            raise
     finally:
         done.set()
 
@@ -129,28 +135,11 @@ class Pipeline:
         self.interrupted = False
         self.queues: dict[str, queue.Queue] = {}
 
-    def _prepare(self) -> None:
-        """Runs :attr:`prepare`; a failure is left to the stream (the source then does the
-        work as it goes, or fails in the producer stage, which names it)."""
-        try:
-            self.prepare(self._prepare_stop)
-        except Exception:  # noqa: BLE001 - see the docstring
-            pass
-        finally:
-            self._prepared.set()
+    def _warm_kernels(self) -> None:
+        """Loads the stages' compiled kernels (:func:`lfstream.stream.warmup.warm_kernels`)."""
+        from lfstream.stream.warmup import warm_kernels
 
-    def _warm(self, done: threading.Event) -> None:
-        """Loads the stages' compiled kernels (:func:`lfstream.stream.warmup.warm_kernels`),
-        then sets ``done``; whatever fails here fails again in its stage, which reports it
-        with the stage and frame."""
-        try:
-            from lfstream.stream.warmup import warm_kernels
-
-            warm_kernels(self.config, decode=self.sender is None)
-        except Exception:  # noqa: BLE001 - see the docstring
-            pass
-        finally:
-            done.set()
+        warm_kernels(self.config, decode=self.sender is None)
 
     def stop(self) -> None:
         """Stops every stage (Ctrl-C); the run then reports ``interrupted``."""
@@ -195,9 +184,12 @@ class Pipeline:
         warmed = threading.Event()
         try:
             if self.prepare is not None:
-                preparing = threading.Thread(target=self._prepare, name="lfstream-prepare", daemon=True)
+                preparing = threading.Thread(target=_run_then_set, args=(lambda: self.prepare(self._prepare_stop),
+                                                                         self._prepared, True),
+                                             name="lfstream-prepare", daemon=True)
                 preparing.start()
-            threading.Thread(target=self._warm, args=(warmed,), name="lfstream-warmup", daemon=True).start()
+            threading.Thread(target=_run_then_set, args=(self._warm_kernels, warmed, True), name="lfstream-warmup",
+                             daemon=True).start()
             while not warmed.wait(0.2):  # in slices: Ctrl-C reaches this thread meanwhile
                 pass
             if preparing is not None:

@@ -19,7 +19,6 @@ import numpy as np
 
 from lfstream.codec.bitstream import Packet
 from lfstream.codec.decoder import DecodedFrame, Decoder
-from lfstream.codec.encoder import Encoder
 from lfstream.codec.stream_encoder import CodingOptions, StreamEncoder
 from lfstream.errors import LFStreamError, LFValueError
 from lfstream.lightfield import canonical_views
@@ -222,11 +221,6 @@ class EncoderStage(ConsumerStage):
                                                   views_hint=True), cfg.fps, present)
         self.rate = RateStats()
 
-    @property
-    def encoder(self) -> Encoder:
-        """The stream's encoder (before the first frame: the one the configuration describes)."""
-        return self.stream.encoder if self.stream.encoder is not None else self.config.encoder()
-
     def work(self, item: SourceFrame) -> Packet:
         lf = item.lf
         first = self.stream.frames == 0
@@ -238,16 +232,9 @@ class EncoderStage(ConsumerStage):
         return packet
 
     def coding(self) -> dict:
-        """What the stream's encoder codes (the summary's ``coding``): preset, quality, hint
-        (and its resolution divisor, ``hint_scale``), residual layer, and the default's check
-        of its prediction (``prediction_db``)."""
-        enc = self.encoder
-        db = self.stream.prediction_db
-        return {"preset": enc.preset, "quality": int(enc.quality), "depth_hint": bool(enc.depth_hint),
-                "hint_scale": int(enc.hint_options.hint_scale) if enc.depth_hint else None,
-                "residual": enc.residual, "residual_mode": enc.residual_mode if enc.residual is not None else None,
-                "hance_map": bool(enc.hance_map),
-                "prediction_db": None if db is None else round(float(db), 3)}
+        """What the stream's encoder codes (the summary's ``coding``,
+        :meth:`lfstream.codec.stream_encoder.StreamEncoder.coding`)."""
+        return self.stream.coding()
 
     def forward(self, packet: Packet) -> bool:
         return self.channel.send(packet, self.control.stop_event)
