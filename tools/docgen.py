@@ -202,6 +202,40 @@ def seed_table(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def fast_end_table(doc: dict) -> str:
+    """``bench/throughput.py --fast-end``: the default decode against HEVC's decode to RGB per
+    scene, and ``lfstream stream``'s frames/s per run, each against its target."""
+    rows = doc["results"]
+    decode = [r for r in rows if "ratio_best" in r]
+    stream = [r for r in rows if "fps_runs" in r]
+    lines = []
+    if decode:
+        target = decode[0]["target_ratio"]
+        lines += [f"| scene | views | lfstream ms | HEVC ms | ratio (best of {decode[0]['runs']}) | per-round median "
+                  f"(range) | ≥ {target:g}× |", "|---|---|---|---|---|---|---|"]
+        for r in decode:
+            u, v, h, w = r["shape"][:4]
+            lines.append(f"| {r['lf']} | {u}×{v}×{h}×{w} | {r['lfstream_best_ms']:.1f} | {r['hevc_best_ms']:.1f} | "
+                         f"{r['ratio_best']:.2f}× | {r['ratio_median']:.2f}× ({r['ratio_range'][0]:.2f}–"
+                         f"{r['ratio_range'][1]:.2f}) | {'yes' if r['meets_target'] else 'no'} |")
+        lines.append("")
+    if stream:
+        target = stream[0]["target_fps"]
+        lines += [f"| `lfstream stream` of | frames/s, each run | CPU ms a frame | ≥ {target:g} every run |",
+                  "|---|---|---|---|"]
+        for r in stream:
+            lines.append(f"| {r['lf']} | {', '.join(f'{f:.2f}' for f in r['fps_runs'])} | "
+                         f"{r['process_cpu_ms_per_frame']:.0f} | {'yes' if r['meets_target'] else 'no'} |")
+        lines.append("")
+    lines.append(f"`bench/throughput.py --fast-end` on {machine(doc)}; the ratios hold for this CPU.")
+    return "\n".join(lines) + "\n"
+
+
+def fast_end_tables() -> str:
+    """Every ``docs/results/fast_end*.json`` (one a CPU measured), each under its machine."""
+    return "\n".join(fast_end_table(json.loads(path.read_text())) for path in sorted(RESULTS.glob("fast_end*.json")))
+
+
 def zoo_table(manifest: dict | None = None) -> str:
     """The model zoo from the weights manifest: name, preset, parameters, SHA-256 and the
     reference metrics it records."""
@@ -274,7 +308,8 @@ def bench_sections() -> str:
     and results."""
     out = []
     for path in sorted(RESULTS.glob("*.json")):
-        if path.stem in ("codec", "rate", "rd", "centre_depth_loo", "networks_seed"):  # their own tables
+        # these have tables of their own
+        if path.stem in ("codec", "rate", "rd", "centre_depth_loo", "networks_seed") or path.stem.startswith("fast_end"):
             continue
         doc = json.loads(path.read_text())
         out += [f"### `bench/{path.stem}.py`", "", f"Measured on {machine(doc)}.", "", generic_table(doc)]
@@ -294,7 +329,8 @@ def docs_blocks() -> dict[str, str]:
             "bd": bd_table(load("rd")) if (RESULTS / "rd.json").exists() else "",
             "cli": cli_reference(), "bench": bench_sections(), "machine": f"Measured on {machine(codec)}.\n",
             "loo": loo_table(load("centre_depth_loo")) if (RESULTS / "centre_depth_loo.json").exists() else "",
-            "seed": seed_table(load("networks_seed")) if (RESULTS / "networks_seed.json").exists() else ""}
+            "seed": seed_table(load("networks_seed")) if (RESULTS / "networks_seed.json").exists() else "",
+            "fast-end": fast_end_tables()}
 
 
 def render(text: str, made: dict[str, str]) -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from lfstream.cli._common import coding_layers, emit, float_in, int_in, parse_float_list, path_arg
@@ -70,6 +70,27 @@ def single_threaded_opencv() -> Iterator[None]:
 
     with single_thread(cv2.getNumThreads, cv2.setNumThreads):
         yield
+
+
+@contextlib.contextmanager
+def frozen_garbage_collector() -> Iterator[Callable[[], None]]:
+    """Yields the ``on_warm`` of a :class:`~lfstream.stream.Pipeline` that collects once and
+    then freezes every object alive (the modules, the kernels, the networks), so that the
+    stream's garbage collections no longer walk them; unfrozen afterwards.
+
+    With torch and numba loaded a full collection walks hundreds of thousands of objects that
+    live as long as the process, and the stream's allocations set one off every few frames
+    (measured on the docs' experiments page). A process setting: the command decides it."""
+    import gc
+
+    def freeze() -> None:
+        gc.collect()
+        gc.freeze()
+
+    try:
+        yield freeze
+    finally:
+        gc.unfreeze()
 
 
 def check_output_folder(out: Path | None) -> None:

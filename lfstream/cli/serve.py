@@ -39,9 +39,9 @@ def run(args: argparse.Namespace) -> int:
                 # on stderr whatever --json says: a script needs the port (--port 0) before it sends
                 print(f"listening on {receiver.address[0]}:{receiver.address[1]} -> {out}", file=sys.stderr,
                       flush=True)
-                with _pipeline.single_threaded_opencv():
-                    summary = Pipeline(None, cfg, out, receiver=receiver,
-                                       progress=_pipeline.progress_callback(args)).run()
+                with _pipeline.single_threaded_opencv(), _pipeline.frozen_garbage_collector() as on_warm:
+                    summary = Pipeline(None, cfg, out, receiver=receiver, progress=_pipeline.progress_callback(args),
+                                       on_warm=on_warm).run()
             except KeyboardInterrupt:  # at any moment after the folder is claimed: a labelled summary
                 summary = stopped_summary("tcp")
                 if receiver is not None:

@@ -79,10 +79,10 @@ def _stream(args: argparse.Namespace, sender, out) -> int:
                                         residual=args.residual, residual_mode=args.residual_mode,
                                         hance_map=args.hance_map, transport=args.transport,
                                         fps=source.fps or 30.0)
-        pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
-                        stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
-                        present=source.present, prepare=source.prepare)
-        with _pipeline.single_threaded_opencv():
+        with _pipeline.single_threaded_opencv(), _pipeline.frozen_garbage_collector() as on_warm:
+            pipe = Pipeline(source.frames, cfg, out, sender=sender, progress=_pipeline.progress_callback(args),
+                            stream_file=(out / "stream.lfs") if out is not None else None, total_frames=source.total,
+                            present=source.present, prepare=source.prepare, on_warm=on_warm)
             summary = pipe.run()
     except KeyboardInterrupt:
         # Ctrl-C before the stages ran (reading the input, loading kernels)

@@ -102,6 +102,9 @@ class Pipeline:
             in the summary's ``warmup_s``); given an event set when the run is stopped.
         sink_delay_s: seconds the sink waits on each frame: a slow consumer, for tests and
             benchmarks of the bounded queues' backpressure (0: none).
+        on_warm: called on the calling thread once the kernels are loaded (and the source
+            prepared), just before the stream is timed: where a command settles its process
+            (:func:`lfstream.cli._pipeline.collected_and_frozen`).
 
     Attributes:
         stats: per stage name, its :class:`~lfstream.stream.report.StageStats` (live while running).
@@ -111,7 +114,8 @@ class Pipeline:
                  sender: Sender | None = None, receiver: Receiver | None = None,
                  progress: Callable[[str], None] | None = None, stream_file: Path | None = None,
                  total_frames: int | None = None, present: np.ndarray | None = None,
-                 prepare: Callable[[threading.Event], object] | None = None, sink_delay_s: float = 0.0) -> None:
+                 prepare: Callable[[threading.Event], object] | None = None, sink_delay_s: float = 0.0,
+                 on_warm: Callable[[], None] | None = None) -> None:
         config.validate()
         if sink_delay_s < 0:
             raise LFValueError(f"sink_delay_s: >= 0, got {sink_delay_s!r}")
@@ -126,6 +130,7 @@ class Pipeline:
         self.total_frames = total_frames
         self.present = present
         self.prepare = prepare
+        self.on_warm = on_warm
         self._prepare_stop = threading.Event()
         # set when the preparation ends: waited on instead of Thread.join, which a Ctrl-C
         # interrupting it can leave reporting a live thread as stopped
@@ -201,6 +206,8 @@ class Pipeline:
             if preparing is not None and preparing.ident is not None and not self._prepared.is_set():
                 self._prepare_stop.set()
                 self._prepared.wait()
+        if self.on_warm is not None:
+            self.on_warm()
         t_start, cpu_start = time.perf_counter(), time.process_time()
         send_channel, recv_channel = self._channels()
         qs = cfg.queue_size

@@ -1030,3 +1030,18 @@ def test_no_hance_is_a_deprecated_spelling_of_hance_off(capsys, tmp_path):
     code, _, err = run(capsys, "decode", tmp_path / "c.lfs", "-o", tmp_path / "c.npy", "--no-hance", "--hance", "on")
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--no-hance" in err
     assert not (tmp_path / "c.npy").exists()
+
+
+def test_frozen_garbage_collector_freezes_on_warm_and_unfreezes_after():
+    """The stream command's ``on_warm`` collects and freezes what is alive; leaving the
+    block unfreezes it, so a caller running commands in one process is left as it was."""
+    import gc
+
+    from lfstream.cli._pipeline import frozen_garbage_collector
+
+    gc.unfreeze()
+    with frozen_garbage_collector() as on_warm:
+        assert gc.get_freeze_count() == 0  # nothing frozen before the warm-up ends
+        on_warm()
+        assert gc.get_freeze_count() > 1000
+    assert gc.get_freeze_count() == 0

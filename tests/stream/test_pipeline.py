@@ -352,6 +352,25 @@ def test_prepare_runs_before_the_timed_stream_and_may_fail(tmp_path):
             assert events == ["first frame"]
 
 
+def test_on_warm_runs_once_after_prepare_and_before_the_first_frame(tmp_path):
+    """``on_warm`` (where a command settles its process) is called once, on the calling
+    thread, after the source's prepare and before the producer takes the first frame."""
+    events = []
+
+    def frames():
+        events.append("first frame")
+        yield from small_source(frames=2)
+
+    def on_warm():
+        events.append(("warm", threading.current_thread() is threading.main_thread()))
+
+    out = prepare_output_dir(tmp_path / "warm")
+    summary = Pipeline(frames(), StreamConfig(refocus="sas", save=()), out,
+                       prepare=lambda stop: events.append("prepared"), on_warm=on_warm).run()
+    assert summary["frames"] == 2
+    assert events == ["prepared", ("warm", True), "first frame"]
+
+
 def test_ctrl_c_during_the_warm_up_stops_prepare(tmp_path, monkeypatch):
     """Ctrl-C while the kernels load: the pipeline sets prepare's stop event and waits for
     it to finish (a render stopped so removes its partial cache) before the interrupt goes on.
