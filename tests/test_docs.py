@@ -86,6 +86,22 @@ def test_results_table_is_made_from_the_json():
     assert all(len(anchors) == len(docgen.ANCHORS) for *_, anchors in docgen._points(doc))
 
 
+def test_fast_end_table_is_made_from_the_json():
+    """Every scene's decode ratio and every stream run's frames/s appear, each judged
+    against its target, under the CPU that measured them."""
+    doc = docgen.load("fast_end")
+    table = docgen.fast_end_table(doc)
+    assert doc["metadata"]["device"]["cpu"] in table
+    for r in doc["results"]:
+        if "ratio_best" in r:
+            assert f"| {r['lf']} |" in table and f"{r['ratio_best']:.2f}×" in table
+            assert (r["ratio_best"] >= r["target_ratio"]) == r["meets_target"]
+        else:
+            assert ", ".join(f"{f:.2f}" for f in r["fps_runs"]) in table
+            assert (min(r["fps_runs"]) >= r["target_fps"]) == r["meets_target"]
+    assert table in docgen.fast_end_tables()
+
+
 def test_zoo_table_lists_every_shipped_network_with_its_hash():
     import json
 
