@@ -104,7 +104,7 @@ class Pipeline:
             benchmarks of the bounded queues' backpressure (0: none).
         on_warm: called on the calling thread once the kernels are loaded (and the source
             prepared), just before the stream is timed: where a command settles its process
-            (:func:`lfstream.cli._pipeline.collected_and_frozen`).
+            (:func:`lfstream.cli._pipeline.frozen_garbage_collector`).
 
     Attributes:
         stats: per stage name, its :class:`~lfstream.stream.report.StageStats` (live while running).
